@@ -1,0 +1,1 @@
+"""On-board runtime: observation builder, pose estimator, policy runtime, setpoint streaming, mission runner."""

@@ -1,0 +1,1 @@
+"""Learning: the gymnasium environment, SAC / HRL-SAC agents, training, evaluation and export."""

@@ -1,0 +1,124 @@
+"""The simulated autopilot's parameters: a small subset of PX4's, with PX4's names and encoding.
+
+PX4 sends integer parameters "bytewise": the int32's four bytes are put in PARAM_VALUE.param_value
+(a float field) unchanged, and it announces MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE in
+AUTOPILOT_VERSION. We do the same so that clients written for PX4 decode our integers correctly.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
+INT32 = mavlink.MAV_PARAM_TYPE_INT32
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its PX4 name, type, default, allowed range and meaning."""
+
+    name: str
+    kind: int  # REAL32 or INT32
+    default: float
+    minimum: float
+    maximum: float
+    doc: str
+    allowed: tuple[int, ...] = ()  # for enumerations: the values this simulator implements
+
+
+# Defaults follow PX4 v1.14 except where a comment says why not.
+PARAM_SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec("MIS_TAKEOFF_ALT", REAL32, 2.5, 0.0, 500.0, "takeoff altitude above home when NAV_TAKEOFF param7 is NaN (m)"),
+    ParamSpec("COM_OF_LOSS_T", REAL32, 1.0, 0.0, 60.0, "time without offboard setpoints before the failsafe (s)"),
+    ParamSpec("COM_OBL_RC_ACT", INT32, 0, 0, 7,
+              "offboard-loss failsafe: 0 position hold (POSCTL), 3 return (RTL), 4 land, 5 hold (AUTO.LOITER)",
+              allowed=(0, 3, 4, 5)),
+    ParamSpec("COM_DISARM_LAND", REAL32, 2.0, -1.0, 20.0, "auto-disarm this long after landing (s); < 0 never"),
+    ParamSpec("COM_DISARM_PRFLT", REAL32, 10.0, -1.0, 60.0, "auto-disarm if armed on the ground this long without taking off (s); < 0 never"),
+    ParamSpec("MPC_XY_CRUISE", REAL32, 5.0, 0.5, 20.0, "horizontal cruise speed in auto modes such as RTL (m/s)"),
+    ParamSpec("MPC_XY_VEL_MAX", REAL32, 12.0, 0.5, 20.0, "horizontal speed limit, also for offboard setpoints (m/s)"),
+    ParamSpec("MPC_Z_VEL_MAX_UP", REAL32, 3.0, 0.5, 8.0, "climb speed limit (m/s)"),
+    ParamSpec("MPC_Z_VEL_MAX_DN", REAL32, 1.5, 0.5, 4.0, "descent speed limit (m/s)"),
+    ParamSpec("MPC_TKO_SPEED", REAL32, 1.5, 0.6, 5.0, "takeoff climb speed (m/s)"),
+    ParamSpec("MPC_LAND_SPEED", REAL32, 0.7, 0.6, 3.0, "final landing descent speed (m/s)"),
+    ParamSpec("MPC_Z_V_AUTO_DN", REAL32, 1.5, 0.5, 4.0, "auto-mode descent speed above MPC_LAND_ALT1 (m/s)"),
+    ParamSpec("MPC_LAND_ALT1", REAL32, 10.0, 0.0, 122.0, "below this altitude landing starts to slow down (m)"),
+    ParamSpec("MPC_LAND_ALT2", REAL32, 5.0, 0.0, 122.0, "below this altitude landing descends at MPC_LAND_SPEED (m)"),
+    ParamSpec("MPC_YAWRAUTO_MAX", REAL32, 45.0, 5.0, 360.0, "yaw rate limit in auto modes and offboard (deg/s)"),
+    # PX4 returns at 60 m; the simulated missions fly low over the sea, so 30 m keeps RTLs short.
+    ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0, "RTL climbs to at least this altitude above home (m)"),
+    ParamSpec("BAT_CRIT_THR", REAL32, 0.07, 0.05, 0.5, "battery fraction that triggers RTL"),
+    ParamSpec("BAT_EMERGEN_THR", REAL32, 0.05, 0.03, 0.5, "battery fraction that triggers an immediate landing"),
+    ParamSpec("MAV_SYS_ID", INT32, 1, 1, 250, "this vehicle's MAVLink system id (read-only here: set it on the command line)"),
+    ParamSpec("SYS_AUTOSTART", INT32, 10016, 0, 9999999, "airframe id (10016: the SITL quadrotor)"),
+    # Non-zero calibration ids: some ground stations judge sensors "calibrated" from these.
+    ParamSpec("CAL_GYRO0_ID", INT32, 1311244, 0, 2**31 - 1, "gyro calibration id (non-zero = calibrated)"),
+    ParamSpec("CAL_ACC0_ID", INT32, 1311244, 0, 2**31 - 1, "accelerometer calibration id (non-zero = calibrated)"),
+    ParamSpec("CAL_MAG0_ID", INT32, 197388, 0, 2**31 - 1, "magnetometer calibration id (non-zero = calibrated)"),
+)
+
+READ_ONLY = frozenset({"MAV_SYS_ID"})
+
+
+def encode_bytewise(value: float, kind: int) -> float:
+    """The float that carries ``value`` in PARAM_VALUE / PARAM_SET (int32 bytes reinterpreted)."""
+    if kind == INT32:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+    return float(value)
+
+
+def decode_bytewise(wire_value: float, kind: int) -> float:
+    """Inverse of :func:`encode_bytewise`."""
+    if kind == INT32:
+        return float(struct.unpack("<i", struct.pack("<f", wire_value))[0])
+    return float(wire_value)
+
+
+class ParameterStore:
+    """Values by name, in a fixed order (the PARAM_VALUE index), with validation on set."""
+
+    def __init__(self, overrides: dict[str, float] | None = None):
+        self.specs = {spec.name: spec for spec in PARAM_SPECS}
+        self.names = [spec.name for spec in PARAM_SPECS]
+        self._values = {spec.name: float(spec.default) for spec in PARAM_SPECS}
+        for name, value in (overrides or {}).items():
+            error = self.check(name, value)
+            if error:
+                raise ValueError(error)
+            self._values[name] = float(value)
+
+    def __getitem__(self, name: str) -> float:
+        return self._values[name]
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def check(self, name: str, value: float) -> str | None:
+        """Why ``value`` cannot be stored in ``name``, or None if it can."""
+        spec = self.specs.get(name)
+        if spec is None:
+            return f"unknown parameter {name!r}"
+        if not math.isfinite(value):
+            return f"{name}: value must be finite, got {value}"
+        if not spec.minimum <= value <= spec.maximum:
+            return f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}]"
+        if spec.kind == INT32 and value != int(value):
+            return f"{name}: must be an integer, got {value:g}"
+        if spec.allowed and int(value) not in spec.allowed:
+            return f"{name}: {int(value)} is not implemented here (allowed: {', '.join(map(str, spec.allowed))})"
+        return None
+
+    def set(self, name: str, value: float) -> str | None:
+        """Store a value; returns the reason it was refused (value unchanged), or None."""
+        error = self.check(name, value)
+        if error is None and name in READ_ONLY:
+            error = f"{name} is read-only"
+        if error is None:
+            self._values[name] = float(value)
+        return error
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)

@@ -1,0 +1,210 @@
+"""Telemetry: which messages the vehicle streams, how often, and how each is filled.
+
+Rates follow PX4's defaults for a normal MAVLink instance closely enough for MAVSDK, MAVProxy and
+QGroundControl; every one can be changed per link with MAV_CMD_SET_MESSAGE_INTERVAL. Builders read the
+*sensor* values (noisy GPS, baro, attitude), never the simulator's ground truth, as a real autopilot's
+estimate would be.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Callable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_bridge.px4_modes import base_mode
+
+if TYPE_CHECKING:  # the vehicle imports this module
+    from sitl_bridge.vehicle import SimulatedVehicle
+
+DEFAULT_RATES_HZ: dict[int, float] = {
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 10.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 10.0,
+    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: 2.0,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
+}
+
+# The capabilities we really have (PX4 claims more: missions, FTP, ...; we do not implement those).
+CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0, official release
+
+SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+           | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+           | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+           | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+           | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+           | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
+
+CELL_COUNT = 4  # a 4S LiPo: 3.5 V (empty) to 4.2 V (full) per cell
+UINT16_MAX = 65535
+
+
+class TelemetrySchedule:
+    """Per-link message intervals and the next time each message is due (on a fixed grid)."""
+
+    def __init__(self, rates_hz: dict[int, float]):
+        self.interval_s: dict[int, float] = {}
+        self.next_due_s: dict[int, float] = {}
+        for msg_id, rate in rates_hz.items():
+            self.set_interval(msg_id, 1.0 / rate if rate > 0 else None, now=0.0)
+
+    def set_interval(self, msg_id: int, interval_s: float | None, now: float) -> None:
+        """Stream ``msg_id`` every ``interval_s`` from ``now`` on; None stops it."""
+        if interval_s is None:
+            self.interval_s.pop(msg_id, None)
+            self.next_due_s.pop(msg_id, None)
+        else:
+            self.interval_s[msg_id] = interval_s
+            self.next_due_s[msg_id] = now
+
+    def due(self, now: float) -> list[int]:
+        """Messages due at ``now``; advances their deadlines by one interval (or resyncs if far behind)."""
+        due = []
+        for msg_id, deadline in self.next_due_s.items():
+            if deadline <= now + 1e-9:
+                due.append(msg_id)
+                interval = self.interval_s[msg_id]
+                deadline += interval
+                self.next_due_s[msg_id] = deadline if deadline > now else now + interval
+        return due
+
+
+def _deg_e7(value_deg: float) -> int:
+    return int(round(value_deg * 1e7))
+
+
+def heartbeat(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    ap = v.autopilot
+    status = mavlink.MAV_STATE_ACTIVE if ap.armed else mavlink.MAV_STATE_STANDBY
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+                                             base_mode(ap.mode, ap.armed), ap.mode.custom_mode, status, 3)
+
+
+def sys_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    health = SENSORS
+    if not v.autopilot.gps_ok:
+        health &= ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    if v.autopilot.prearm_failure(v.state) is not None:
+        health &= ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    volts, amps, fraction = battery_reading(v)
+    return mavlink.MAVLink_sys_status_message(SENSORS, SENSORS, health, 150, int(volts * 1000), int(amps * 100),
+                                              int(round(fraction * 100)), 0, 0, 0, 0, 0, 0)
+
+
+def battery_reading(v: SimulatedVehicle) -> tuple[float, float, float]:
+    """(voltage V, current A, remaining fraction) from the dynamics' energy and power."""
+    fraction = max(0.0, v.state.battery_wh / v.config.airframe.battery_capacity_wh)
+    volts = CELL_COUNT * (3.5 + 0.7 * fraction)
+    return volts, v.power_w / volts, fraction
+
+
+def battery_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    volts, amps, fraction = battery_reading(v)
+    capacity_wh = v.config.airframe.battery_capacity_wh
+    used_wh = capacity_wh - v.state.battery_wh
+    charge = mavlink.MAV_BATTERY_CHARGE_STATE_OK
+    if fraction <= v.autopilot.params["BAT_EMERGEN_THR"]:
+        charge = mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
+    elif fraction <= v.autopilot.params["BAT_CRIT_THR"]:
+        charge = mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
+    remaining_s = int(v.state.battery_wh * 3600 / v.power_w) if v.power_w > 1.0 else 0
+    return mavlink.MAVLink_battery_status_message(
+        0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767,
+        [int(volts * 1000)] + [UINT16_MAX] * 9, int(amps * 100),
+        int(used_wh / (CELL_COUNT * 3.7) * 1000), int(used_wh * 36), int(round(fraction * 100)),
+        remaining_s, charge, [0, 0, 0, 0], 0, 0)
+
+
+def _estimate(v: SimulatedVehicle) -> tuple[float, float, float, float, float, float]:
+    """What the autopilot believes: GPS horizontal position/velocity and baro altitude (NED)."""
+    fix = v.sensors.gps
+    return fix.north_m, fix.east_m, -v.sensors.baro_alt_m, fix.vn_mps, fix.ve_mps, fix.vd_mps
+
+
+def global_position_int(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
+    if v.sensors.gps is None:
+        return None  # PX4 publishes no global position before it has one
+    north, east, down, vn, ve, vd = _estimate(v)
+    lat, lon, alt = v.frame.to_geodetic(north, east, down)
+    heading = int(round(math.degrees(v.sensors.attitude_rpy[2]) * 100)) % 36000
+    return mavlink.MAVLink_global_position_int_message(
+        v.time_boot_ms, _deg_e7(lat), _deg_e7(lon), int(round(alt * 1000)), int(round(-down * 1000)),
+        int(round(vn * 100)), int(round(ve * 100)), int(round(vd * 100)), heading)
+
+
+def local_position_ned(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
+    if v.sensors.gps is None:
+        return None
+    north, east, down, vn, ve, vd = _estimate(v)
+    return mavlink.MAVLink_local_position_ned_message(v.time_boot_ms, north, east, down, vn, ve, vd)
+
+
+def attitude(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    roll, pitch, yaw = v.sensors.attitude_rpy
+    return mavlink.MAVLink_attitude_message(v.time_boot_ms, roll, pitch, yaw, 0.0, 0.0, v.yaw_rate_rad_s)
+
+
+def gps_raw_int(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    fix = v.sensors.gps
+    time_usec = int(v.time_s * 1e6)
+    if fix is None:
+        return mavlink.MAVLink_gps_raw_int_message(time_usec, mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0,
+                                                   UINT16_MAX, UINT16_MAX, UINT16_MAX, UINT16_MAX, 0)
+    lat, lon, alt = v.frame.to_geodetic(fix.north_m, fix.east_m, fix.down_m)
+    course = int(round(math.degrees(math.atan2(fix.ve_mps, fix.vn_mps)) * 100)) % 36000
+    return mavlink.MAVLink_gps_raw_int_message(
+        time_usec, fix.fix_type, _deg_e7(lat), _deg_e7(lon), int(round(alt * 1000)), int(fix.eph_m * 100),
+        int(fix.epv_m * 100), int(round(math.hypot(fix.vn_mps, fix.ve_mps) * 100)), course, fix.satellites)
+
+
+def vfr_hud(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    vn, ve, vd = v.ground_velocity
+    heading = int(round(math.degrees(v.sensors.attitude_rpy[2]))) % 360
+    hover_share = v.power_w / v.config.airframe.hover_power_w if v.autopilot.armed else 0.0
+    throttle = int(min(100.0, 50.0 * hover_share))
+    alt_amsl = v.config.home.alt_m + v.sensors.baro_alt_m
+    return mavlink.MAVLink_vfr_hud_message(math.hypot(vn - v.config.wind.north_mps, ve - v.config.wind.east_mps),
+                                           math.hypot(vn, ve), heading, throttle, alt_amsl, -vd)
+
+
+def extended_sys_state(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED,
+                                                      v.autopilot.landed_state(v.state))
+
+
+def home_position(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    home = v.config.home
+    return mavlink.MAVLink_home_position_message(_deg_e7(home.lat_deg), _deg_e7(home.lon_deg),
+                                                 int(round(home.alt_m * 1000)), 0.0, 0.0, 0.0,
+                                                 [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(v.time_s * 1e6))
+
+
+def autopilot_version(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_autopilot_version_message(
+        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+        0x5349_4D00_0000_0000 | v.config.system_id)  # "SIM" + system id: stable across runs
+
+
+BUILDERS: dict[int, Callable[[SimulatedVehicle], mavlink.MAVLink_message | None]] = {
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: attitude,
+    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
+    mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+}

@@ -1,0 +1,88 @@
+"""Shared fixtures: free UDP ports and a simulated vehicle served over real UDP."""
+from __future__ import annotations
+
+import os
+import socket
+
+# pymavlink clients in the tests speak MAVLink 2 from the first byte (set before mavutil is imported).
+os.environ.setdefault("MAVLINK20", "1")
+
+import pytest  # noqa: E402
+
+
+def free_udp_ports(count: int) -> list[int]:
+    """Ports that were free a moment ago (bound to port 0 by the OS, then released)."""
+    sockets = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(count)]
+    try:
+        for sock in sockets:
+            sock.bind(("127.0.0.1", 0))
+        return [sock.getsockname()[1] for sock in sockets]
+    finally:
+        for sock in sockets:
+            sock.close()
+
+
+@pytest.fixture
+def udp_ports() -> list[int]:
+    return free_udp_ports(4)
+
+
+class UdpClient:
+    """A plain pymavlink client that streams setpoints and records what it hears, all from one thread."""
+
+    def __init__(self, url: str):
+        from pymavlink import mavutil
+
+        self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
+        self.latest: dict[str, object] = {}
+        self.received: list[object] = []
+        self.stream: tuple[float, float, float] | None = None  # NED velocity re-sent at 20 Hz
+        self.stream_frame = 1  # MAV_FRAME_LOCAL_NED
+        self._next_send = 0.0
+
+    def pump(self, seconds: float) -> None:
+        """Receive (and stream) for ``seconds`` of wall time."""
+        import time
+
+        end = time.monotonic() + seconds
+        while True:
+            now = time.monotonic()
+            if self.stream is not None and now >= self._next_send:
+                vn, ve, vd = self.stream
+                self.conn.mav.set_position_target_local_ned_send(0, 1, 1, self.stream_frame, 3527,
+                                                                 0, 0, 0, vn, ve, vd, 0, 0, 0, 0, 0)
+                self._next_send = now + 0.05
+            if now >= end:
+                return
+            msg = self.conn.recv_match(blocking=True, timeout=min(0.01, end - now))
+            while msg is not None:
+                if msg.get_type() != "BAD_DATA":
+                    self.latest[msg.get_type()] = msg
+                    self.received.append(msg)
+                msg = self.conn.recv_match(blocking=False)
+
+    def wait(self, predicate, timeout_s: float, what: str):
+        import time
+
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            value = predicate()
+            if value:
+                return value
+            self.pump(0.02)
+        raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+    def wait_message(self, msg_type: str, timeout_s: float = 3.0, match=lambda m: True, since: int | None = None):
+        """The first ``msg_type`` message received after index ``since`` (default: from now on)."""
+        seen = len(self.received) if since is None else since
+        return self.wait(lambda: next((m for m in self.received[seen:]
+                                       if m.get_type() == msg_type and match(m)), None), timeout_s, msg_type)
+
+    def command(self, command: int, *params: float, timeout_s: float = 3.0, target_component: int = 1):
+        """COMMAND_LONG; returns the matching COMMAND_ACK."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.conn.mav.command_long_send(1, target_component, command, 0, *p)
+        return self.wait_message("COMMAND_ACK", timeout_s, lambda m: m.command == command)
+
+    def close(self) -> None:
+        self.conn.close()
