@@ -1,0 +1,230 @@
+"""PX4's offboard rules, SET_POSITION_TARGET_LOCAL_NED frames and masks, parameters and determinism."""
+from __future__ import annotations
+
+import hashlib
+import math
+import struct
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_bridge.dynamics import Wind
+from sitl_bridge.link import MemoryMavConnection, memory_link_pair
+from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.scripted_flight import LockstepPilot
+from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
+
+ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+LOCAL_NED, BODY_NED = mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_NED
+VELOCITY, VELOCITY_YAW, VELOCITY_YAW_RATE, POSITION = 3527, 2503, 1479, 3576
+
+
+def airborne(params: dict | None = None, seed: int = 2) -> LockstepPilot:
+    pilot = LockstepPilot.create(VehicleConfig(seed=seed, params={"MIS_TAKEOFF_ALT": 10.0, **(params or {})}))
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 2.0, "GPS")
+    assert pilot.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == ACCEPTED
+    assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7) == ACCEPTED
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.mode is FlightMode.HOLD and not pilot.vehicle.state.on_ground,
+                   30.0, "takeoff")
+    return pilot
+
+
+def in_offboard(pilot: LockstepPilot, stream=(0.0, 0.0, 0.0, LOCAL_NED)) -> LockstepPilot:
+    pilot.stream = stream
+    pilot.vehicle.run(0.0)
+    fly(pilot, 1.2)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
+    return pilot
+
+
+def fly(pilot: LockstepPilot, seconds: float) -> None:
+    end = pilot.vehicle.time_s + seconds
+    pilot.wait_for(lambda: pilot.vehicle.time_s >= end - 1e-9, seconds + 1, "time")
+
+
+# ---------------------------------------------------------------- the switch into OFFBOARD
+def test_offboard_rejected_without_a_stream():
+    pilot = airborne()
+    assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
+    assert pilot.heartbeat_mode() is FlightMode.HOLD
+
+
+def test_offboard_rejected_after_less_than_a_second_of_setpoints():
+    pilot = airborne()
+    pilot.stream = (0.0, 0.0, 0.0, LOCAL_NED)
+    fly(pilot, 0.6)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
+    fly(pilot, 0.6)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
+
+
+def test_offboard_rejected_when_setpoints_come_slower_than_2_hz():
+    pilot = airborne()
+    pilot.stream, pilot.stream_period_s = (0.0, 0.0, 0.0, LOCAL_NED), 0.7
+    fly(pilot, 3.0)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
+
+
+# ---------------------------------------------------------------- offboard loss failsafe
+@pytest.mark.parametrize("action, mode", [(None, FlightMode.POSCTL), (5, FlightMode.HOLD),
+                                          (4, FlightMode.LAND), (3, FlightMode.RTL)])
+def test_offboard_loss_runs_the_configured_failsafe(action, mode):
+    pilot = in_offboard(airborne({} if action is None else {"COM_OBL_RC_ACT": action}),
+                        stream=(4.0, 0.0, 0.0, LOCAL_NED))
+    fly(pilot, 3.0)
+    pilot.stream = None
+    lost_at = pilot.vehicle.time_s
+    pilot.wait_for(lambda: pilot.heartbeat_mode() is mode, 2.0, f"failsafe to {mode.name}")
+    assert pilot.vehicle.time_s - lost_at == pytest.approx(1.0, abs=0.1)  # COM_OF_LOSS_T
+    fly(pilot, 4.0)
+    vn, ve, _ = pilot.vehicle.ground_velocity
+    if mode in (FlightMode.POSCTL, FlightMode.HOLD, FlightMode.LAND):
+        assert math.hypot(vn, ve) < 0.3  # never keeps flying the last velocity
+    else:
+        assert vn < 0.3  # RTL: climbing in place or heading back home, not onwards
+
+
+def test_offboard_loss_timeout_follows_com_of_loss_t():
+    pilot = in_offboard(airborne({"COM_OF_LOSS_T": 2.5}))
+    pilot.stream = None
+    lost_at = pilot.vehicle.time_s
+    pilot.wait_for(lambda: pilot.heartbeat_mode() is FlightMode.POSCTL, 4.0, "failsafe")
+    assert pilot.vehicle.time_s - lost_at == pytest.approx(2.5, abs=0.1)
+
+
+# ---------------------------------------------------------------- frames and masks
+def test_velocity_in_local_ned_is_flown_and_clamped():
+    pilot = in_offboard(airborne(), stream=(0.0, 30.0, 0.0, LOCAL_NED))
+    fly(pilot, 6.0)
+    vn, ve, vd = pilot.vehicle.ground_velocity
+    assert ve == pytest.approx(12.0, abs=0.2)  # MPC_XY_VEL_MAX
+    assert abs(vn) < 0.2 and abs(vd) < 0.2
+
+
+def test_body_frame_velocity_is_rotated_by_heading():
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    for _ in range(80):  # turn to face east (yaw +90 deg) with the velocity + yaw mask
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, VELOCITY_YAW, 0, 0, 0, 0, 0, 0,
+                                                     0, 0, 0, math.pi / 2, 0)
+        fly(pilot, 0.05)
+    assert pilot.vehicle.state.yaw_rad == pytest.approx(math.pi / 2, abs=0.02)
+    pilot.stream = (3.0, 0.0, 0.0, BODY_NED)  # "forward"
+    fly(pilot, 4.0)
+    vn, ve, _ = pilot.vehicle.ground_velocity
+    assert ve == pytest.approx(3.0, abs=0.2) and abs(vn) < 0.2
+    assert pilot.vehicle.state.yaw_rad == pytest.approx(math.pi / 2, abs=0.02)  # ignored yaw holds heading
+
+
+def test_yaw_rate_mask_turns_at_the_commanded_rate():
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    start = pilot.vehicle.state.yaw_rad
+    for _ in range(40):
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, VELOCITY_YAW_RATE, 0, 0, 0, 0, 0, 0,
+                                                     0, 0, 0, 0, math.radians(20))
+        fly(pilot, 0.05)
+    turned = math.degrees(math.remainder(pilot.vehicle.state.yaw_rad - start, math.tau))
+    assert turned == pytest.approx(40.0, abs=3.0)
+
+
+def test_position_only_setpoint_flies_to_the_point():
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    for _ in range(300):
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, POSITION, 20.0, -5.0, -15.0,
+                                                     0, 0, 0, 0, 0, 0, 0, 0)
+        fly(pilot, 0.1)
+    s = pilot.vehicle.state
+    assert (s.north_m, s.east_m, s.down_m) == pytest.approx((20.0, -5.0, -15.0), abs=0.3)
+
+
+@pytest.mark.parametrize("frame, mask, reason", [
+    (mavlink.MAV_FRAME_LOCAL_ENU, VELOCITY, "frame"),
+    (mavlink.MAV_FRAME_GLOBAL, VELOCITY, "frame"),
+    (LOCAL_NED, VELOCITY & ~0b111000000, "acceleration"),  # acceleration used
+    (LOCAL_NED, VELOCITY | 0b1000, "partial"),  # vx ignored, vy/vz used
+    (LOCAL_NED, 0b110111111111, "exactly one"),  # nothing used
+])
+def test_unsupported_frames_and_masks_are_ignored_and_counted(frame, mask, reason):
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    before = pilot.vehicle.state
+    for _ in range(5):
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, 0, 0, 0, 5.0, 5.0, 0, 0, 0, 0, 0, 0)
+        fly(pilot, 0.05)
+    ignored = pilot.vehicle.autopilot.setpoints_ignored
+    assert sum(n for r, n in ignored.items() if reason in r) == 5
+    assert math.hypot(pilot.vehicle.state.north_m - before.north_m, pilot.vehicle.state.east_m - before.east_m) < 0.2
+
+
+# ---------------------------------------------------------------- parameters
+def test_parameter_set_and_get():
+    pilot = LockstepPilot.create(VehicleConfig(seed=0))
+    assert pilot.set_param("MPC_XY_CRUISE", 7.5) == pytest.approx(7.5)
+    assert pilot.vehicle.params["MPC_XY_CRUISE"] == 7.5
+    assert pilot.set_param("MPC_XY_CRUISE", 99.0) == pytest.approx(7.5)  # out of range: refused, old value echoed
+    # integers travel bytewise, as in PX4
+    wire = struct.unpack("<f", struct.pack("<i", 4))[0]
+    pilot.mav.param_set_send(1, 1, b"COM_OBL_RC_ACT", wire, mavlink.MAV_PARAM_TYPE_INT32)
+    echo = pilot.wait_message("PARAM_VALUE", 0.5)
+    assert struct.unpack("<i", struct.pack("<f", echo.param_value))[0] == 4
+    assert pilot.vehicle.params["COM_OBL_RC_ACT"] == 4
+    # read by name and by index
+    pilot.mav.param_request_read_send(1, 1, b"COM_OF_LOSS_T", -1)
+    by_name = pilot.wait_message("PARAM_VALUE", 0.5)
+    assert (by_name.param_id, by_name.param_value) == ("COM_OF_LOSS_T", pytest.approx(1.0))
+    pilot.mav.param_request_read_send(1, 1, b"", by_name.param_index)
+    assert pilot.wait_message("PARAM_VALUE", 0.5).param_id == "COM_OF_LOSS_T"
+    # unknown names get no answer
+    pilot.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, mavlink.MAV_PARAM_TYPE_REAL32)
+    pilot.mav.param_request_read_send(1, 1, b"NO_SUCH_PARAM", -1)
+    seen = len(pilot.received)
+    fly(pilot, 0.5)
+    assert not any(m.get_type() == "PARAM_VALUE" for m in pilot.received[seen:])
+
+
+def test_timesync_is_answered():
+    pilot = LockstepPilot.create(VehicleConfig(seed=0))
+    pilot.vehicle.run(2.0)
+    pilot.mav.timesync_send(0, 123456789)
+    reply = pilot.wait_message("TIMESYNC", 0.5)
+    assert reply.ts1 == 123456789 and reply.tc1 == pytest.approx(2.0e9, rel=0.01)
+
+
+# ---------------------------------------------------------------- determinism
+class RecordingLink:
+    """Records every byte the vehicle sends on a memory link."""
+
+    def __init__(self, link):
+        self.link, self.name, self.sent = link, link.name, bytearray()
+
+    def send(self, data: bytes) -> None:
+        self.sent += data
+        self.link.send(data)
+
+    def receive(self) -> list[bytes]:
+        return self.link.receive()
+
+    def close(self) -> None:
+        self.link.close()
+
+
+def telemetry_digest(seed: int) -> str:
+    vehicle_end, client_end = memory_link_pair()
+    recorder = RecordingLink(vehicle_end)
+    config = VehicleConfig(seed=seed, wind=Wind(north_mps=3.0, east_mps=-1.0, gust_mps=1.5, seed=seed),
+                           params={"MIS_TAKEOFF_ALT": 8.0})
+    pilot = LockstepPilot(SimulatedVehicle(config, [recorder]), MemoryMavConnection(client_end))
+    pilot.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+    fly(pilot, 8.0)
+    in_offboard(pilot, stream=(2.0, 1.0, 0.0, LOCAL_NED))
+    fly(pilot, 10.0)
+    return hashlib.sha256(recorder.sent).hexdigest()
+
+
+def test_same_seed_gives_a_byte_identical_telemetry_stream():
+    assert telemetry_digest(11) == telemetry_digest(11)
+    assert telemetry_digest(11) != telemetry_digest(12)
