@@ -35,6 +35,11 @@ MASK_ACCELERATION = 0b111000000
 MASK_YAW = 1024
 MASK_YAW_RATE = 2048
 
+def as_int(value: float, default: int = -1) -> int:
+    """A command parameter as an integer; NaN/inf (MAVSDK sends NaN for unused params) become ``default``."""
+    return int(value) if math.isfinite(value) else default
+
+
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 
 
@@ -169,7 +174,7 @@ class Autopilot:
         Repeating a command (a retransmission) gives the same result and no second effect.
         """
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = int(p[1]) == FORCE_MAGIC
+            force = as_int(p[1]) == FORCE_MAGIC
             if p[0] == 1:
                 return self.arm(now, state, force)
             if p[0] == 0:
@@ -182,17 +187,18 @@ class Autopilot:
         if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return self.set_mode(FlightMode.RTL, now, state, "NAV_RETURN_TO_LAUNCH")
         if command == mavlink.MAV_CMD_DO_SET_MODE:
-            if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            if not as_int(p[0], 0) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 return DENIED  # PX4 only understands custom modes
-            mode = FlightMode.from_main_sub(int(p[1]), int(p[2]))
+            main, sub = as_int(p[1]), as_int(p[2], 0)
+            mode = FlightMode.from_main_sub(main, sub)
             if mode is None:
-                self._event(now, f"mode main={int(p[1])} sub={int(p[2])} is not emulated", mavlink.MAV_SEVERITY_WARNING)
+                self._event(now, f"mode main={main} sub={sub} is not emulated", mavlink.MAV_SEVERITY_WARNING)
                 return DENIED
             if mode is FlightMode.TAKEOFF:
                 self.takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
             return self.set_mode(mode, now, state, "DO_SET_MODE")
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
-            return self._zoom(int(p[0]), p[1], now)
+            return self._zoom(as_int(p[0]), p[1], now)
         return UNSUPPORTED
 
     def _takeoff(self, altitude_amsl: float, now: float, state: VehicleState) -> int:

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
 from sitl_bridge import dynamics, telemetry
-from sitl_bridge.autopilot import ACCEPTED, DENIED, UNSUPPORTED, Autopilot, AutopilotEvent
+from sitl_bridge.autopilot import ACCEPTED, DENIED, Autopilot, AutopilotEvent, as_int
 from sitl_bridge.link import Link
 from sitl_bridge.params import ParameterStore, decode_bytewise, encode_bytewise
 from sitl_bridge.px4_modes import FlightMode
@@ -97,6 +97,7 @@ class SimulatedVehicle:
         self.endpoints = [Endpoint(link, config.system_id, rates) for link in links]
         self.on_event = on_event
         self.unhandled: dict[str, int] = {}
+        self.handler_errors = 0
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -186,7 +187,11 @@ class SimulatedVehicle:
         name = msg.get_type()
         handler = self._handlers.get(name)
         if handler is not None:
-            handler(endpoint, msg)
+            try:
+                handler(endpoint, msg)
+            except Exception as exc:  # a bad message must never take the vehicle down
+                self.handler_errors += 1
+                self.log(f"error handling {name}: {exc!r}")
         elif name == "BAD_DATA":
             endpoint.bad_frames += 1
         else:
@@ -210,9 +215,9 @@ class SimulatedVehicle:
         now = self.time_s
         follow_up: mavlink.MAVLink_message | None = None
         if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_message_interval(endpoint, int(p[0]), p[1], now)
+            result = self._set_message_interval(endpoint, as_int(p[0]), p[1], now)
         elif command in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            msg_id = as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
             builder = telemetry.BUILDERS.get(msg_id)
             follow_up = builder(self) if builder else None
             result = ACCEPTED if follow_up is not None else DENIED
@@ -228,6 +233,8 @@ class SimulatedVehicle:
 
     def _set_message_interval(self, endpoint: Endpoint, msg_id: int, interval_us: float, now: float) -> int:
         if msg_id not in telemetry.BUILDERS or msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return DENIED
+        if not math.isfinite(interval_us):
             return DENIED
         if interval_us == 0:  # back to the default rate
             rate = {**telemetry.DEFAULT_RATES_HZ, **self.config.telemetry_rates_hz}.get(msg_id, 0.0)

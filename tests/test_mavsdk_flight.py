@@ -1,0 +1,111 @@
+"""MAVSDK (the ``mavsdk`` package's asyncio API) flies the simulated vehicle over real UDP.
+
+MAVSDK listens with ``udpin://0.0.0.0:PORT`` and the vehicle's API link sends to PORT, as with PX4 SITL.
+Every await is bounded; the vehicle runs at 2x real time to keep the test short.
+"""
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+
+import pytest
+
+mavsdk = pytest.importorskip("mavsdk.asyncio")
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
+from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
+from mavsdk.asyncio.plugins.offboard import OffboardAsync, VelocityBodyYawspeed, VelocityNedYaw  # noqa: E402
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync  # noqa: E402
+
+from sitl_bridge.server import UdpPorts, VehicleServer  # noqa: E402
+from sitl_bridge.vehicle import VehicleConfig  # noqa: E402
+
+pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
+SPEED = 2.0  # simulated seconds per wall second
+T = 10.0  # default bound on one await, wall seconds
+
+
+async def first(stream, predicate, timeout_s: float, what: str):
+    """The first item of an async stream that satisfies ``predicate``; the stream is always closed."""
+    async def scan():
+        async for item in stream:
+            if predicate(item):
+                return item
+
+    async with contextlib.aclosing(stream):
+        try:
+            return await asyncio.wait_for(scan(), timeout_s)
+        except asyncio.TimeoutError:
+            raise AssertionError(f"MAVSDK: timed out after {timeout_s} s waiting for {what}") from None
+
+
+async def sim_sleep(seconds: float) -> None:
+    await asyncio.sleep(seconds / SPEED)
+
+
+async def fly(port: int, server: VehicleServer) -> None:
+    vehicle = server.vehicle
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    try:
+        await asyncio.wait_for(drone.add_any_connection(f"udpin://0.0.0.0:{port}"), T)
+        system = await asyncio.wait_for(drone.first_autopilot(timeout_s=T), T + 2)
+        assert system is not None, "MAVSDK saw no autopilot"
+        action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
+
+        await first(telemetry.subscribe_health(),
+                    lambda h: h.is_global_position_ok and h.is_home_position_ok and h.is_armable, 20, "health")
+        await asyncio.wait_for(action.set_takeoff_altitude(8.0), T)
+        assert vehicle.params["MIS_TAKEOFF_ALT"] == 8.0
+        await asyncio.wait_for(action.arm(), T)
+        await first(telemetry.subscribe_armed(), bool, T, "armed")
+        await asyncio.wait_for(action.takeoff(), T)
+        await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 7.0, 20, "8 m")
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.HOLD, T, "HOLD after takeoff")
+        assert -vehicle.state.down_m == pytest.approx(8.0, abs=1.0)
+
+        # Offboard: setpoints first (MAVSDK streams them), > 1 s later the switch is accepted.
+        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0)), T)
+        await sim_sleep(1.5)
+        await asyncio.wait_for(offboard.start(), T)
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.OFFBOARD, T, "OFFBOARD")
+
+        # NED: 3 m/s north for 4 s, facing east (yaw 90 deg).
+        start = vehicle.state
+        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(3.0, 0.0, 0.0, 90.0)), T)
+        await sim_sleep(4.0)
+        moved_n, moved_e = vehicle.state.north_m - start.north_m, vehicle.state.east_m - start.east_m
+        assert 9.0 < moved_n < 13.0 and abs(moved_e) < 1.0
+        assert math.degrees(vehicle.state.yaw_rad) == pytest.approx(90.0, abs=3.0)
+
+        # Body frame: after a stop, "forward" is east; 2 m/s for 3 s.
+        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)), T)
+        await sim_sleep(2.0)
+        start = vehicle.state
+        await asyncio.wait_for(offboard.set_velocity_body(VelocityBodyYawspeed(2.0, 0.0, 0.0, 0.0)), T)
+        await sim_sleep(3.0)
+        moved_n, moved_e = vehicle.state.north_m - start.north_m, vehicle.state.east_m - start.east_m
+        assert 4.5 < moved_e < 6.5 and abs(moved_n) < 0.5
+        pv = await asyncio.wait_for(telemetry.position_velocity_ned(), T)
+        assert pv.velocity.east_m_s == pytest.approx(2.0, abs=0.5)
+
+        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)), T)
+        await asyncio.wait_for(offboard.stop(), T)
+        await first(telemetry.subscribe_flight_mode(), lambda m: m != FlightMode.OFFBOARD, T, "leaving OFFBOARD")
+
+        await asyncio.wait_for(action.return_to_launch(), T)
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.RETURN_TO_LAUNCH, T, "RTL")
+        await first(telemetry.subscribe_landed_state(), lambda s: s == LandedState.ON_GROUND, 60, "landed")
+        await first(telemetry.subscribe_armed(), lambda armed: not armed, 20, "disarmed")
+        assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.0  # back home
+    finally:
+        drone.destroy()
+
+
+def test_mavsdk_flies_takeoff_offboard_ned_and_body_rtl_and_land(udp_ports):
+    api_port, mavsdk_port = udp_ports[:2]
+    config = VehicleConfig(seed=5, params={"RTL_RETURN_ALT": 10.0})
+    with VehicleServer(config, UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None),
+                       speed=SPEED) as server:
+        asyncio.run(asyncio.wait_for(fly(mavsdk_port, server), 150))
+        assert server.error is None
+        assert server.vehicle.handler_errors == 0
