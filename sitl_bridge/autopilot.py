@@ -205,14 +205,13 @@ class Autopilot:
         if not self.armed:
             self._event(now, "Takeoff denied: disarmed", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
-        if math.isnan(altitude_amsl):
-            target = self.params["MIS_TAKEOFF_ALT"]
-        else:  # PX4 reads param7 as altitude above mean sea level
-            target = altitude_amsl - self.home_alt_m
-            if target < 1.0:
-                self._event(now, f"Takeoff denied: param7 {altitude_amsl:.1f} m AMSL is not above home "
-                                 f"({self.home_alt_m:.1f} m AMSL)", mavlink.MAV_SEVERITY_CRITICAL)
-                return DENIED
+        # PX4 reads param7 as an altitude above mean sea level and never takes off lower than
+        # MIS_TAKEOFF_ALT above home (a relative altitude such as MAVProxy's "takeoff 10" ends up there).
+        minimum = self.params["MIS_TAKEOFF_ALT"]
+        target = altitude_amsl - self.home_alt_m if math.isfinite(altitude_amsl) else minimum
+        if target < minimum:
+            self._event(now, f"Using minimum takeoff altitude: {minimum:.2f} m", mavlink.MAV_SEVERITY_CRITICAL)
+            target = minimum
         self.takeoff_alt_m = target
         if self.mode is FlightMode.TAKEOFF:  # a repeat (or a new altitude) while climbing
             self.hold_target = (self.hold_target[0], self.hold_target[1], -target)

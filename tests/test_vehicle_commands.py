@@ -74,8 +74,10 @@ def test_takeoff_results(pilot):
     assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7) == TEMPORARILY_REJECTED  # disarmed
     assert pilot.command(ARM, 1) == ACCEPTED
     home_alt = pilot.vehicle.config.home.alt_m
-    # param7 is AMSL: an altitude below home is refused
-    assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 10.0) == DENIED
+    # param7 is AMSL: 10 (meant as "10 m up") is below home, so PX4's minimum, MIS_TAKEOFF_ALT, is used
+    assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 10.0) == ACCEPTED
+    assert pilot.vehicle.autopilot.takeoff_alt_m == pilot.vehicle.params["MIS_TAKEOFF_ALT"]
+    assert any("minimum takeoff altitude" in m.text for m in pilot.received if m.get_type() == "STATUSTEXT")
     assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, home_alt + 6) == ACCEPTED
     assert pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, home_alt + 6) == ACCEPTED
     assert pilot.vehicle.autopilot.mode is FlightMode.TAKEOFF
