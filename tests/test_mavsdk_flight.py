@@ -39,6 +39,18 @@ async def first(stream, predicate, timeout_s: float, what: str):
             raise AssertionError(f"MAVSDK: timed out after {timeout_s} s waiting for {what}") from None
 
 
+_inflight: set[asyncio.Future] = set()
+
+
+async def bounded(call, timeout_s: float = T):
+    """Await a MAVSDK call with a bound, keeping its executor task tracked: MAVSDK runs each call in a
+    thread that a timeout cannot stop, and destroying MAVSDK under a blocked call would hang the test."""
+    task = asyncio.ensure_future(call)
+    _inflight.add(task)
+    task.add_done_callback(_inflight.discard)
+    return await asyncio.wait_for(asyncio.shield(task), timeout_s)
+
+
 async def sim_sleep(seconds: float) -> None:
     await asyncio.sleep(seconds / SPEED)
 
@@ -47,57 +59,59 @@ async def fly(port: int, server: VehicleServer) -> None:
     vehicle = server.vehicle
     drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     try:
-        await asyncio.wait_for(drone.add_any_connection(f"udpin://0.0.0.0:{port}"), T)
-        system = await asyncio.wait_for(drone.first_autopilot(timeout_s=T), T + 2)
+        await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
+        system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)
         assert system is not None, "MAVSDK saw no autopilot"
         action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
 
         await first(telemetry.subscribe_health(),
                     lambda h: h.is_global_position_ok and h.is_home_position_ok and h.is_armable, 20, "health")
-        await asyncio.wait_for(action.set_takeoff_altitude(8.0), T)
+        await bounded(action.set_takeoff_altitude(8.0))
         assert vehicle.params["MIS_TAKEOFF_ALT"] == 8.0
-        await asyncio.wait_for(action.arm(), T)
+        await bounded(action.arm())
         await first(telemetry.subscribe_armed(), bool, T, "armed")
-        await asyncio.wait_for(action.takeoff(), T)
+        await bounded(action.takeoff())
         await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 7.0, 20, "8 m")
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.HOLD, T, "HOLD after takeoff")
         assert -vehicle.state.down_m == pytest.approx(8.0, abs=1.0)
 
         # Offboard: setpoints first (MAVSDK streams them), > 1 s later the switch is accepted.
-        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0)), T)
+        await bounded(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0)))
         await sim_sleep(1.5)
-        await asyncio.wait_for(offboard.start(), T)
+        await bounded(offboard.start())
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.OFFBOARD, T, "OFFBOARD")
 
         # NED: 3 m/s north for 4 s, facing east (yaw 90 deg).
         start = vehicle.state
-        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(3.0, 0.0, 0.0, 90.0)), T)
+        await bounded(offboard.set_velocity_ned(VelocityNedYaw(3.0, 0.0, 0.0, 90.0)))
         await sim_sleep(4.0)
         moved_n, moved_e = vehicle.state.north_m - start.north_m, vehicle.state.east_m - start.east_m
         assert 9.0 < moved_n < 13.0 and abs(moved_e) < 1.0
         assert math.degrees(vehicle.state.yaw_rad) == pytest.approx(90.0, abs=3.0)
 
         # Body frame: after a stop, "forward" is east; 2 m/s for 3 s.
-        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)), T)
+        await bounded(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)))
         await sim_sleep(2.0)
         start = vehicle.state
-        await asyncio.wait_for(offboard.set_velocity_body(VelocityBodyYawspeed(2.0, 0.0, 0.0, 0.0)), T)
+        await bounded(offboard.set_velocity_body(VelocityBodyYawspeed(2.0, 0.0, 0.0, 0.0)))
         await sim_sleep(3.0)
         moved_n, moved_e = vehicle.state.north_m - start.north_m, vehicle.state.east_m - start.east_m
         assert 4.5 < moved_e < 6.5 and abs(moved_n) < 0.5
-        pv = await asyncio.wait_for(telemetry.position_velocity_ned(), T)
+        pv = await bounded(telemetry.position_velocity_ned())
         assert pv.velocity.east_m_s == pytest.approx(2.0, abs=0.5)
 
-        await asyncio.wait_for(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)), T)
-        await asyncio.wait_for(offboard.stop(), T)
+        await bounded(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 90.0)))
+        await bounded(offboard.stop())
         await first(telemetry.subscribe_flight_mode(), lambda m: m != FlightMode.OFFBOARD, T, "leaving OFFBOARD")
 
-        await asyncio.wait_for(action.return_to_launch(), T)
+        await bounded(action.return_to_launch())
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.RETURN_TO_LAUNCH, T, "RTL")
         await first(telemetry.subscribe_landed_state(), lambda s: s == LandedState.ON_GROUND, 60, "landed")
         await first(telemetry.subscribe_armed(), lambda armed: not armed, 20, "disarmed")
         assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.0  # back home
     finally:
+        if _inflight:  # never destroy under a blocked call; MAVSDK times its own calls out within 3 s
+            await asyncio.wait(set(_inflight), timeout=5)
         drone.destroy()
 
 

@@ -1,0 +1,59 @@
+"""A mission: a scenario plus how to fly it (altitude, speed, geofence, decision timing, limits)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from missions.scenario import Scenario, SearchArea
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """How the search is flown; shared by the training environment and the mission runner."""
+
+    altitude_m: float = 50.0
+    """Search altitude above home (m), held constant; sets the camera footprint. Allowed [10, 120]."""
+    max_speed_mps: float = 10.0
+    """Horizontal speed at full movement command |a| = 1 (m/s). Allowed [1, 20]."""
+    step_period_s: float = 1.0
+    """Time between policy decisions (s): one environment step. Allowed [0.1, 10]."""
+    subgoal_interval: int = 30
+    """K: low-level steps between meta-controller decisions. Allowed [1, 1000]."""
+    max_steps: int = 1000
+    """Decision steps before the episode is truncated (paper preset: 10,000). Allowed [10, 100000]."""
+    reach_radius_m: float = 15.0
+    """Horizontal distance to the primary target that counts as reaching it (m). Allowed [1, 100]."""
+
+    def __post_init__(self) -> None:
+        for name, low, high in (("altitude_m", 10.0, 120.0), ("max_speed_mps", 1.0, 20.0),
+                                ("step_period_s", 0.1, 10.0), ("subgoal_interval", 1, 1000),
+                                ("max_steps", 10, 100_000), ("reach_radius_m", 1.0, 100.0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not low <= value <= high:
+                raise ValueError(f"FlightSettings.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        for name in ("subgoal_interval", "max_steps"):
+            if int(getattr(self, name)) != getattr(self, name):
+                raise ValueError(f"FlightSettings.{name} must be an integer, got {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class Mission:
+    """What the runner flies and what the environment trains on."""
+
+    scenario: Scenario = field(default_factory=Scenario)
+    flight: FlightSettings = field(default_factory=FlightSettings)
+    name: str = "mission"
+    geofence: SearchArea | None = None
+    """Where the drone may fly; None means the search area itself. Must contain the search area."""
+
+    def __post_init__(self) -> None:
+        fence, area = self.geofence, self.scenario.area
+        if fence is not None and not (fence.north_min_m <= area.north_min_m and fence.north_max_m >= area.north_max_m
+                                      and fence.east_min_m <= area.east_min_m and fence.east_max_m >= area.east_max_m):
+            raise ValueError("Mission.geofence must contain the search area (scenario.area)")
+
+    @property
+    def fence(self) -> SearchArea:
+        """The effective geofence: leaving it ends an episode (and is refused in flight)."""
+        return self.geofence or self.scenario.area

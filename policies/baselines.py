@@ -1,0 +1,122 @@
+"""Scripted search baselines over the environment's action space (vectorised over a batch).
+
+They use only what a real crew knows: the search area, the datum and its uncertainty, their own position
+and their own detections (the last detection of the victim), never the hidden victim location.
+
+* ``random``: uniform actions.
+* ``expanding_square``: IAMSAR expanding square search from the datum: legs of S, S, 2S, 2S, 3S, 3S, ...
+  turning right each time, with track spacing S = 1.8 x the footprint half-width (10 % overlap).
+* ``parallel_track``: IAMSAR parallel track ("lawnmower") search of the box of +-2.5 sigma around the datum,
+  east-west tracks S apart, starting from the corner nearest to the drone.
+
+Both pattern searches fly at full speed with the sensor on and the camera at its widest, and once the victim
+has been detected fly straight to the last detection.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from missions import search
+
+if TYPE_CHECKING:
+    from policies.env_core import SarSearchBatch
+
+TRACK_SPACING_FACTOR = 1.8
+PARALLEL_TRACK_SIGMAS = 2.5
+MAX_WAYPOINTS = 128
+ZOOM = 0.0
+
+
+class ScriptedSearch:
+    """Base: a per-environment waypoint list, followed at full speed; the victim's detection overrides it."""
+
+    def __init__(self, core: "SarSearchBatch"):
+        self.core = core
+        self.waypoints = np.zeros((core.n, MAX_WAYPOINTS, 2))
+        self.count = np.zeros(core.n, dtype=np.int64)
+        self.next = np.zeros(core.n, dtype=np.int64)
+        self.spacing_m = TRACK_SPACING_FACTOR * float(search.footprint_half_width_m(core.flight.altitude_m, ZOOM))
+        self.planned_episode = np.full(core.n, -1, dtype=np.int64)
+
+    def plan(self, index: int) -> np.ndarray:
+        """The waypoints of environment ``index`` for its current episode, (W, 2) north/east metres."""
+        raise NotImplementedError
+
+    def act(self) -> np.ndarray:
+        core = self.core
+        # (re)plan environments that started a new episode since the last call
+        fresh = core.steps == 0
+        for i in np.flatnonzero(fresh | (self.count == 0)):
+            points = self.plan(int(i))[:MAX_WAYPOINTS]
+            self.waypoints[i, : len(points)] = points
+            self.count[i], self.next[i] = len(points), 0
+        position = core.position
+        index = np.arange(core.n)
+        goal = self.waypoints[index, np.minimum(self.next, self.count - 1)]
+        arrived = np.hypot(*(goal - position).T) < 0.5 * core.flight.max_speed_mps * core.flight.step_period_s + 1.0
+        self.next += arrived & (self.next < self.count - 1)
+        goal = self.waypoints[index, self.next]
+        goal = np.where(core.has_detection[:, None], core.last_detection, goal)
+        offset = goal - position
+        distance = np.hypot(*offset.T)
+        # full speed, slowing over the last step so that we stop on the point instead of overshooting it
+        speed_fraction = np.minimum(1.0, distance / (core.flight.max_speed_mps * core.flight.step_period_s))
+        direction = offset / np.maximum(distance, 1e-9)[:, None]
+        actions = np.zeros((core.n, 4))
+        actions[:, 0:2] = direction * speed_fraction[:, None]
+        actions[:, 2] = 1.0
+        actions[:, 3] = ZOOM
+        return actions
+
+
+class ExpandingSquare(ScriptedSearch):
+    def plan(self, index: int) -> np.ndarray:
+        datum = self.core.datum[index]
+        points = [datum]
+        headings = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))  # N, E, S, W: turning right
+        leg = 1
+        for turn in range(MAX_WAYPOINTS - 1):
+            step = np.array(headings[turn % 4]) * leg * self.spacing_m
+            points.append(points[-1] + step)
+            if turn % 2 == 1:
+                leg += 1
+        return np.array(points)
+
+
+class ParallelTrack(ScriptedSearch):
+    def plan(self, index: int) -> np.ndarray:
+        core = self.core
+        area, datum = core.area[index], core.datum[index]
+        half_box = PARALLEL_TRACK_SIGMAS * core.datum_sigma[index]
+        south, north = max(area[0], datum[0] - half_box), min(area[1], datum[0] + half_box)
+        west, east = max(area[2], datum[1] - half_box), min(area[3], datum[1] + half_box)
+        tracks = np.arange(south + self.spacing_m / 2, north, self.spacing_m)
+        if core.position[index, 0] > (south + north) / 2:  # start from the nearer end
+            tracks = tracks[::-1]
+        start_west = abs(core.position[index, 1] - west) <= abs(core.position[index, 1] - east)
+        points = []
+        for k, track in enumerate(tracks):
+            ends = (west, east) if (k % 2 == 0) == start_west else (east, west)
+            points += [(track, ends[0]), (track, ends[1])]
+        return np.array(points) if points else datum[None, :]
+
+
+class RandomSearch:
+    """Uniform random actions from a seeded generator."""
+
+    def __init__(self, core: "SarSearchBatch", seed: int = 0):
+        self.core = core
+        self.rng = np.random.default_rng(seed)
+
+    def act(self) -> np.ndarray:
+        low = np.array([-1.0, -1.0, 0.0, 0.0])
+        return self.rng.uniform(low, 1.0, size=(self.core.n, 4))
+
+
+BASELINES: dict[str, Callable[["SarSearchBatch"], object]] = {
+    "random": RandomSearch,
+    "expanding_square": ExpandingSquare,
+    "parallel_track": ParallelTrack,
+}
