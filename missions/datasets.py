@@ -253,7 +253,8 @@ class YoloDataset:
         aliases = dict(CLASS_ALIASES)
         for name, category in (class_map or {}).items():
             if category is not None and category not in CATEGORIES:
-                raise ValueError(f"class_map[{name!r}] must be one of {', '.join(CATEGORIES)} or None, got {category!r}")
+                raise ValueError(f"class_map[{name!r}] must be one of {', '.join(CATEGORIES)} or None, "
+                                 f"got {category!r}")
             aliases[normalise_class_name(name)] = category
         obstacle_names = {normalise_class_name(n) for n in obstacle_classes}
         self.categories: dict[int, str | None] = {}
@@ -361,6 +362,8 @@ class YoloDataset:
         for source in self._sources[split]:
             if source.is_dir():
                 images += [p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()]
+            elif source.suffix.lower() in IMAGE_SUFFIXES:
+                images.append(source)
             else:  # a .txt list of images, relative to the list's folder
                 lines = source.read_text(encoding="utf-8").splitlines()
                 images += [(source.parent / line.strip()) for line in lines if line.strip()]

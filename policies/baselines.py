@@ -73,7 +73,7 @@ class ScriptedSearch:
 
 class ExpandingSquare(ScriptedSearch):
     def plan(self, index: int) -> np.ndarray:
-        datum = self.core.datum[index]
+        datum = self.core.scen.datum[index]
         points = [datum]
         headings = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))  # N, E, S, W: turning right
         leg = 1
@@ -88,8 +88,8 @@ class ExpandingSquare(ScriptedSearch):
 class ParallelTrack(ScriptedSearch):
     def plan(self, index: int) -> np.ndarray:
         core = self.core
-        area, datum = core.area[index], core.datum[index]
-        half_box = PARALLEL_TRACK_SIGMAS * core.datum_sigma[index]
+        area, datum = core.scen.area[index], core.scen.datum[index]
+        half_box = PARALLEL_TRACK_SIGMAS * core.scen.datum_sigma[index]
         south, north = max(area[0], datum[0] - half_box), min(area[1], datum[0] + half_box)
         west, east = max(area[2], datum[1] - half_box), min(area[3], datum[1] + half_box)
         tracks = np.arange(south + self.spacing_m / 2, north, self.spacing_m)

@@ -43,18 +43,16 @@ class SarSearchEnv(gym.Env):
         else:
             episode_seed = int(next_episode_seed(np.array([self._seed], dtype=np.uint64))[0])
         self._seed = episode_seed
-        self.core.reset(0, episode_seed)
-        obs = self.core.observe()[0].copy()
+        self.core.reset([0], [episode_seed])
+        obs = self.core.obs[0].copy()
         self._path = [tuple(self.core.position[0])]
         return obs, {"scenario": self.core.scenarios[0].name, "episode_seed": episode_seed}
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.core.step(np.asarray(action, dtype=np.float64)[None, :])
         self._path.append(tuple(self.core.position[0]))
-        single_info = {key: (value[0].tolist() if isinstance(value, np.ndarray) and value.ndim > 1 else
-                             value[0].item() if isinstance(value, np.ndarray) else value)
-                       for key, value in info.items()}
-        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), single_info
+        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), \
+            {key: value[0] for key, value in info.items()}
 
     def set_goal(self, goal: int) -> np.ndarray:
         """HRL-SAC: the meta-controller's goal for the next K steps (an index into GOAL_NAMES).
@@ -62,7 +60,7 @@ class SarSearchEnv(gym.Env):
         Returns the current observation updated with the goal (its one-hot and, in goal-conditioned mode,
         the goal's point as the target)."""
         self.core.set_goals(np.array([goal]))
-        return self.core.observe()[0].copy()
+        return self.core.obs[0].copy()
 
     @property
     def meta_observation(self) -> np.ndarray:

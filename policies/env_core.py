@@ -56,9 +56,9 @@ def splitmix64(x: np.ndarray) -> np.ndarray:
 def keyed_uniforms(seeds: np.ndarray, steps: np.ndarray, count: int) -> np.ndarray:
     """(N, count) uniforms in [0, 1), a pure function of (seed, step, index): same key, same numbers."""
     with np.errstate(over="ignore"):
-        key = splitmix64(seeds.astype(np.uint64) ^ splitmix64(steps.astype(np.uint64)))
+        key = seeds.astype(np.uint64) * np.uint64(0xD1B54A32D192ED03) + steps.astype(np.uint64) * np.uint64(count)
         bits = splitmix64(key[:, None] + np.arange(count, dtype=np.uint64)[None, :])
-    return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+    return (bits >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
 def next_episode_seed(seed: np.ndarray) -> np.ndarray:
@@ -74,6 +74,9 @@ class SarSearchConfig:
     """Generator split the scenarios come from ("train", "val" or "test") when ``scenarios`` is empty."""
     scenarios: tuple[Scenario, ...] = ()
     """A fixed list of scenarios (a dataset split, mission files); episode seeds index into it."""
+    pool_size: int = 10_000
+    """Number of distinct generated scenarios in the split: episode seed modulo pool_size picks one (the
+    episode seed alone drives the detection draws). Ignored when ``scenarios`` is given."""
     flight: FlightSettings = field(default_factory=FlightSettings)
     """Altitude, speed, decision period, K, step limit and reach radius."""
     goal_conditioned: bool = False
@@ -86,63 +89,69 @@ class SarSearchConfig:
     def __post_init__(self) -> None:
         if not self.scenarios and self.split not in ("train", "val", "test"):
             raise ValueError(f"SarSearchConfig.split must be one of train, val, test, got {self.split!r}")
+        if not 1 <= self.pool_size <= 100_000:
+            raise ValueError(f"SarSearchConfig.pool_size must be in [1, 100000], got {self.pool_size}")
 
 
 class ScenarioSource:
-    """Maps an episode seed to a scenario: a fixed list, or the generator's split."""
+    """The scenarios episodes are drawn from (a fixed list, or ``pool_size`` scenarios of a generator split),
+    packed into one padded ScenarioBatch that fills lazily: each scenario is generated and packed once."""
 
-    def __init__(self, config: SarSearchConfig, cache_size: int = 4096):
+    def __init__(self, config: SarSearchConfig, max_targets: int, max_obstacles: int):
         self.config = config
-        self._cache: dict[int, Scenario] = {}
-        self._cache_size = cache_size
+        self.max_targets, self.max_obstacles = max_targets, max_obstacles
+        self.count = len(config.scenarios) if config.scenarios else config.pool_size
+        blank = search.ScenarioBatch.from_scenarios([Scenario()], num_targets=max_targets,
+                                                    num_obstacles=max_obstacles)
+        self.pool = blank.select(np.zeros(self.count, dtype=np.int64))
+        self.scenarios: list[Scenario | None] = [None] * self.count
 
-    def __call__(self, episode_seed: int) -> Scenario:
+    def rows(self, episode_seeds: np.ndarray) -> np.ndarray:
+        """Pool rows of these episodes (episode seed modulo the pool size), packing any not seen before."""
+        rows = (np.asarray(episode_seeds, dtype=np.uint64) % np.uint64(self.count)).astype(np.int64)
+        for row in rows.tolist():
+            if self.scenarios[row] is None:
+                self._pack(row)
+        return rows
+
+    def _pack(self, row: int) -> None:
         if self.config.scenarios:
-            return self.config.scenarios[episode_seed % len(self.config.scenarios)]
-        scenario = self._cache.get(episode_seed)
-        if scenario is None:
+            scenario = self.config.scenarios[row]
+        else:
             from missions.generator import generate_scenario, split_seed
 
-            scenario = generate_scenario(split_seed(self.config.split, episode_seed))
-            if len(self._cache) >= self._cache_size:
-                self._cache.pop(next(iter(self._cache)))
-            self._cache[episode_seed] = scenario
-        return scenario
+            scenario = generate_scenario(split_seed(self.config.split, row))
+        if len(scenario.targets) > self.max_targets or len(scenario.obstacles) > self.max_obstacles:
+            raise ValueError(f"scenario {scenario.name!r} has {len(scenario.targets)} targets and "
+                             f"{len(scenario.obstacles)} obstacles; the environment holds at most "
+                             f"{self.max_targets} and {self.max_obstacles}")
+        self.pool.assign(row, search.ScenarioBatch.from_scenarios([scenario]))
+        self.scenarios[row] = scenario
 
 
 class SarSearchBatch:
-    """N independent search episodes, stepped together. Arrays are (N, ...); nothing here loops over N
-    except resets (which build each new episode's arrays from its Scenario)."""
+    """N independent search episodes, stepped together. Arrays are (N, ...); nothing here loops over N except
+    resets, which copy each new episode's cached scenario arrays into its slot."""
 
     def __init__(self, config: SarSearchConfig, num_envs: int, max_targets: int = 8, max_obstacles: int = 4):
         self.config = config
-        self.n = num_envs
+        self.n = n = num_envs
         self.flight = flight = config.flight
-        self.source = ScenarioSource(config)
+        self.source = ScenarioSource(config, max_targets, max_obstacles)
         self.airframe = config.airframe or dynamics.MultirotorParams(
             max_speed_xy_mps=max(flight.max_speed_mps, dynamics.MultirotorParams().max_speed_xy_mps))
         self.wind = dynamics.Wind()  # the velocity controller holds the track; wind acts through drift
-        self.max_targets, self.max_obstacles = max_targets, max_obstacles
-        self.scenarios: list[Scenario | None] = [None] * num_envs
-        n, t, o = num_envs, max_targets, max_obstacles
-        self.area = np.zeros((n, 4))
-        self.fence = np.zeros((n, 4))
-        self.home = np.zeros((n, 2))
-        self.datum = np.zeros((n, 2))
-        self.datum_sigma = np.zeros(n)
-        self.targets = np.zeros((n, t, 2))
-        self.target_category = np.zeros((n, t), dtype=np.int64)
-        self.target_valid = np.zeros((n, t), dtype=bool)
-        self.drift_velocity = np.zeros((n, t, 2))
-        self.primary_index = np.zeros(n, dtype=np.int64)
-        self.obstacles = np.zeros((n, o, 3))
-        self.obstacle_valid = np.zeros((n, o), dtype=bool)
-        self.sea = np.zeros(n, dtype=np.int64)
-        self.weather = np.zeros(n, dtype=np.int64)
-        self.time_of_day = np.zeros(n, dtype=np.int64)
-        self.visibility = np.ones(n)
-        self.wind_fraction = np.zeros(n)
-        self.vehicles = dynamics.BatchState.from_states([dynamics.VehicleState()] * n)
+        self.max_targets = max_targets
+        self.scenarios: list[Scenario | None] = [None] * n
+        # Static per episode: the scenarios, packed (area, fence, datum, targets' categories, obstacles, ...).
+        placeholder = search.ScenarioBatch.from_scenarios([Scenario()], num_targets=max_targets,
+                                                          num_obstacles=max_obstacles)
+        self.scen = placeholder.select(np.zeros(n, dtype=np.int64))
+        # Dynamic state.
+        hover = dynamics.VehicleState(down_m=-flight.altitude_m, on_ground=False)
+        self.vehicles = dynamics.BatchState.from_states([hover] * n)
+        self.position = np.zeros((n, 2))
+        self.targets = np.zeros((n, max_targets, 2))
         self.time_s = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
         self.episode_seed = np.zeros(n, dtype=np.uint64)
@@ -155,137 +164,128 @@ class SarSearchBatch:
         self.goal_point = np.zeros((n, 2))
         self.path_length_m = np.zeros(n)
         self.episode_return = np.zeros(n)
-        self.obs = np.zeros((n, OBS_DIM), dtype=np.float32)
+        self.covered_cells = np.zeros(n, dtype=np.int64)
         self.last_action = np.zeros((n, 4))
+        self.obs = np.zeros((n, OBS_DIM), dtype=np.float32)
         self._arange = np.arange(n)
 
     # ------------------------------------------------------------------ resets
-    def reset(self, index: int, episode_seed: int) -> None:
-        """Start a new episode in slot ``index`` with the scenario and detection stream of ``episode_seed``."""
-        scenario = self.source(int(episode_seed))
-        if len(scenario.targets) > self.max_targets or len(scenario.obstacles) > self.max_obstacles:
-            raise ValueError(f"scenario {scenario.name!r} has {len(scenario.targets)} targets and "
-                             f"{len(scenario.obstacles)} obstacles; this environment holds at most "
-                             f"{self.max_targets} and {self.max_obstacles}")
-        self.scenarios[index] = scenario
-        one = search.ScenarioBatch.from_scenarios([scenario])
-        t, o = one.targets.shape[1], one.obstacles.shape[1]
-        self.area[index] = one.area[0]
-        self.fence[index] = one.fence[0]
-        self.home[index] = (0.0, 0.0)
-        self.datum[index] = one.datum[0]
-        self.datum_sigma[index] = one.datum_sigma[0]
-        self.targets[index] = 0.0
-        self.targets[index, :t] = one.targets[0]
-        self.target_category[index] = 0
-        self.target_category[index, :t] = one.target_category[0]
-        self.target_valid[index] = False
-        self.target_valid[index, :t] = one.target_valid[0]
-        self.drift_velocity[index] = 0.0
-        self.drift_velocity[index, :t] = one.drift_velocity[0]
-        self.primary_index[index] = one.primary_index[0]
-        self.obstacles[index] = 0.0
-        self.obstacle_valid[index] = False
-        self.obstacles[index, :o] = one.obstacles[0]
-        self.obstacle_valid[index, :o] = one.obstacle_valid[0]
-        self.sea[index], self.weather[index], self.time_of_day[index] = one.sea[0], one.weather[0], one.time_of_day[0]
-        self.visibility[index], self.wind_fraction[index] = one.visibility[0], one.wind[0]
-        # The episode starts at the start point, already at search altitude and hovering.
-        self.vehicles.set(index, dynamics.VehicleState(north_m=scenario.start_north_m, east_m=scenario.start_east_m,
-                                                       down_m=-self.flight.altitude_m, on_ground=False,
-                                                       battery_wh=self.airframe.battery_capacity_wh))
-        self.time_s[index] = 0.0
-        self.steps[index] = 0
-        self.episode_seed[index] = np.uint64(episode_seed)
-        self.coverage[index] = 0.0
-        self.detections[index] = False
-        self.last_detection[index] = self.datum[index]
-        self.has_detection[index] = False
-        self.first_detection_step[index] = -1
-        self.goal[index] = NO_GOAL
-        self.goal_point[index] = self.datum[index]
-        self.path_length_m[index] = 0.0
-        self.episode_return[index] = 0.0
-        self.last_action[index] = 0.0
+    def reset(self, indices, episode_seeds) -> None:
+        """Start new episodes in slots ``indices`` with the scenarios and detection streams of ``episode_seeds``,
+        and refresh their observations."""
+        indices = np.atleast_1d(np.asarray(indices, dtype=np.int64))
+        seeds = np.atleast_1d(np.asarray(episode_seeds, dtype=np.uint64))
+        rows = self.source.rows(seeds)
+        self.scen.assign(indices, self.source.pool.select(rows))
+        for index, row in zip(indices.tolist(), rows.tolist()):
+            self.scenarios[index] = self.source.scenarios[row]
+        scen = self.scen
+        self.targets[indices] = scen.targets[indices]
+        # Each episode starts at the start point, already at search altitude and hovering.
+        v = self.vehicles
+        v.north_m[indices], v.east_m[indices] = scen.start[indices, 0], scen.start[indices, 1]
+        v.down_m[indices] = -self.flight.altitude_m
+        v.vn_mps[indices] = v.ve_mps[indices] = v.vd_mps[indices] = v.yaw_rad[indices] = 0.0
+        v.battery_wh[indices] = self.airframe.battery_capacity_wh
+        self.position[indices] = scen.start[indices]
+        self.time_s[indices] = 0.0
+        self.steps[indices] = 0
+        self.episode_seed[indices] = seeds
+        self.coverage[indices] = 0.0
+        self.detections[indices] = False
+        self.last_detection[indices] = scen.datum[indices]
+        self.has_detection[indices] = False
+        self.first_detection_step[indices] = -1
+        self.goal[indices] = NO_GOAL
+        self.goal_point[indices] = scen.datum[indices]
+        self.path_length_m[indices] = 0.0
+        self.episode_return[indices] = 0.0
+        self.covered_cells[indices] = 0
+        self.last_action[indices] = 0.0
+        self.observe(indices)
 
     # ------------------------------------------------------------------ goals (HRL-SAC)
     def set_goals(self, goals: np.ndarray, mask: np.ndarray | None = None) -> None:
-        """Give environments a meta-controller goal (index into GOAL_NAMES) and ground it to a point now."""
-        goals = np.asarray(goals, dtype=np.int64)
+        """Give environments a meta-controller goal (index into GOAL_NAMES), ground it to a point now and
+        refresh their observations."""
+        goals = np.broadcast_to(np.asarray(goals, dtype=np.int64), (self.n,))
         mask = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         if np.any((goals[mask] < 0) | (goals[mask] >= len(goal_logic.GOAL_NAMES))):
             raise ValueError(f"goal indices must be in [0, {len(goal_logic.GOAL_NAMES) - 1}], got {goals[mask]}")
+        scen = self.scen
         self.goal[mask] = goals[mask]
-        points = goal_logic.ground_goals(goals[mask], self.position[mask], self.area[mask], self.coverage[mask],
-                                         self.datum[mask], self.datum_sigma[mask], self.last_detection[mask],
-                                         self.has_detection[mask], self.home[mask])
-        self.goal_point[mask] = points
+        self.goal_point[mask] = goal_logic.ground_goals(
+            goals[mask], self.position[mask], scen.area[mask], self.coverage[mask], scen.datum[mask],
+            scen.datum_sigma[mask], self.last_detection[mask], self.has_detection[mask], scen.start[mask])
+        self.observe(np.flatnonzero(mask))
 
-    # ------------------------------------------------------------------ stepping
-    @property
-    def position(self) -> np.ndarray:
-        """(N, 2) drone north, east (m)."""
-        return np.stack([self.vehicles.north_m, self.vehicles.east_m], axis=1)
-
+    # ------------------------------------------------------------------ observing and stepping
     def target_position(self) -> np.ndarray:
         """What the observation calls the target: never the hidden victim location."""
         if self.config.goal_conditioned:
             return self.goal_point
         return self.last_detection  # equals the datum until the victim has been detected
 
-    def observe(self) -> np.ndarray:
-        progress = self.steps / self.flight.max_steps
-        blocks = search.downsample_coverage(self.coverage)
-        goal = self.goal if self.config.goal_conditioned else np.full(self.n, NO_GOAL)
-        return build_observations(self.position, self.target_position(), self.area, progress, self.sea, self.weather,
-                                  self.time_of_day, self.visibility, self.wind_fraction, self.detections, blocks,
-                                  goal, out=self.obs)
+    def observe(self, indices: np.ndarray | None = None) -> np.ndarray:
+        """Rebuild the observations of ``indices`` (all by default) into ``self.obs``; returns ``self.obs``."""
+        if indices is not None and len(indices) == 0:
+            return self.obs
+        rows = slice(None) if indices is None else indices
+        scen = self.scen
+        goal = self.goal[rows] if self.config.goal_conditioned else np.full(len(self.goal[rows]), NO_GOAL)
+        built = build_observations(self.position[rows], self.target_position()[rows], scen.area[rows],
+                                   self.steps[rows] / self.flight.max_steps, scen.sea[rows], scen.weather[rows],
+                                   scen.time_of_day[rows], scen.visibility[rows], scen.wind[rows],
+                                   self.detections[rows], search.downsample_coverage(self.coverage[rows]), goal,
+                                   out=self.obs if indices is None else None)
+        if indices is not None:
+            self.obs[indices] = built
+        return self.obs
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
         """Advance every environment one decision; returns (obs, reward, terminated, truncated, info).
 
         Finished environments are NOT reset here; the wrappers decide when (gymnasium's auto-reset rules).
         """
-        flight = self.flight
+        flight, scen = self.flight, self.scen
         a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.n, 4), ACTION_LOW, ACTION_HIGH)
         self.last_action[:] = a
-        before = self.position
-        self.vehicles = dynamics.step_batch(self.vehicles, a[:, 0] * flight.max_speed_mps,
-                                            a[:, 1] * flight.max_speed_mps, 0.0, self.airframe, self.wind,
-                                            self.time_s, flight.step_period_s)
+        previous = self.position.copy()
+        v = dynamics.step_batch(self.vehicles, a[:, 0] * flight.max_speed_mps, a[:, 1] * flight.max_speed_mps,
+                                0.0, self.airframe, self.wind, self.time_s, flight.step_period_s, out=self.vehicles)
         self.time_s += flight.step_period_s
         self.steps += 1
         position = self.position
-        self.path_length_m += np.hypot(*(position - before).T)
-        search.drift_targets(self.targets, self.drift_velocity, flight.step_period_s)
+        position[:, 0], position[:, 1] = v.north_m, v.east_m
+        self.path_length_m += np.hypot(position[:, 0] - previous[:, 0], position[:, 1] - previous[:, 1])
+        search.drift_targets(self.targets, scen.drift_velocity, flight.step_period_s)
 
         half_width = search.footprint_half_width_m(flight.altitude_m, a[:, 3])
-        search.cover(self.coverage, self.area, position, half_width, a[:, 2])
-        probability = search.detection_probability(position, self.targets, self.target_category, self.target_valid,
-                                                   flight.altitude_m, a[:, 3], a[:, 2], self.sea, self.weather,
-                                                   self.time_of_day, self.visibility)
-        uniforms = keyed_uniforms(self.episode_seed, self.steps, self.max_targets)
-        detected = search.sample_detections(probability, uniforms)
-        self.detections = search.detected_categories(detected, self.target_category)
-        victim_seen = detected[self._arange, self.primary_index]
-        self.last_detection[victim_seen] = self.targets[self._arange, self.primary_index][victim_seen]
+        self.covered_cells += search.cover(self.coverage, scen.area, position, half_width, a[:, 2])
+        probability = scen.detection_probability(position, self.targets, flight.altitude_m, a[:, 3], a[:, 2])
+        detected = keyed_uniforms(self.episode_seed, self.steps, self.max_targets) < probability
+        self.detections = search.detected_categories(detected, scen.target_category)
+        primary = scen.primary_index
+        victim_seen = detected[self._arange, primary]
+        self.last_detection[victim_seen] = self.targets[self._arange, primary][victim_seen]
         first = victim_seen & ~self.has_detection
         self.first_detection_step[first] = self.steps[first]
         self.has_detection |= victim_seen
 
-        distance = search.distance_to_primary(position, self.targets, self.primary_index)
+        distance = search.distance_to_primary(position, self.targets, primary)
         success = distance <= flight.reach_radius_m
-        collision = search.inside_obstacle(position, self.obstacles, self.obstacle_valid) & ~success
-        out_of_bounds = search.outside_fence(position, self.fence) & ~success
-        reward = (REWARD_STEP + REWARD_ENERGY * np.sum(a * a, axis=1) + REWARD_TARGET * success
+        collision = search.inside_obstacle(position, scen.obstacles, scen.obstacle_valid) & ~success
+        out_of_bounds = search.outside_fence(position, scen.fence) & ~success
+        reward = (REWARD_STEP + REWARD_ENERGY * np.einsum("ij,ij->i", a, a) + REWARD_TARGET * success
                   + REWARD_COLLISION * collision + REWARD_BOUNDARY * out_of_bounds)
         self.episode_return += reward
         terminated = success | collision | out_of_bounds
         truncated = (self.steps >= flight.max_steps) & ~terminated
         info = {"success": success, "collision": collision, "out_of_bounds": out_of_bounds,
-                "distance_to_victim_m": distance, "coverage_ratio": search.coverage_ratio(self.coverage),
-                "first_detection_step": self.first_detection_step.copy(), "victim_detected": self.has_detection.copy(),
-                "position": position, "goal_point": self.goal_point.copy(), "path_length_m": self.path_length_m.copy(),
+                "distance_to_victim_m": distance, "coverage_ratio": self.covered_cells / self.coverage[0].size,
+                "first_detection_step": self.first_detection_step.copy(),
+                "victim_detected": self.has_detection.copy(), "position": position.copy(),
+                "goal_point": self.goal_point.copy(), "path_length_m": self.path_length_m.copy(),
                 "episode_return": self.episode_return.copy(), "steps": self.steps.copy()}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 
@@ -298,8 +298,5 @@ class SarSearchBatch:
 def make_batch(config: SarSearchConfig, seeds: Sequence[int]) -> SarSearchBatch:
     """A batch with every slot reset to its seed."""
     batch = SarSearchBatch(config, len(seeds))
-    for i, seed in enumerate(seeds):
-        batch.reset(i, seed)
-    batch.observe()
+    batch.reset(np.arange(len(seeds)), np.asarray(seeds, dtype=np.uint64))
     return batch
-

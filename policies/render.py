@@ -23,7 +23,7 @@ COVERED = np.array([50, 110, 150], dtype=np.uint8)
 
 def render_search(core: "SarSearchBatch", index: int, path: Sequence[tuple[float, float]]) -> np.ndarray:
     """(512, 512, 3) uint8 RGB: coverage, danger zones, objects (victim ringed), datum, path, footprint, goal."""
-    area = core.area[index]
+    area = core.scen.area[index]
 
     def pixel(north: float, east: float) -> tuple[int, int]:
         x = (east - area[2]) / (area[3] - area[2]) * (SIZE_PX - 1)
@@ -34,18 +34,18 @@ def render_search(core: "SarSearchBatch", index: int, path: Sequence[tuple[float
     covered = core.coverage[index][::-1] > 0.5  # row 0 is the southernmost: flip so north is up
     cells = np.where(covered[..., None], COVERED, SEA).astype(np.uint8)
     image = np.ascontiguousarray(cv2.resize(cells, (SIZE_PX, SIZE_PX), interpolation=cv2.INTER_NEAREST))
-    for (north, east, radius), valid in zip(core.obstacles[index], core.obstacle_valid[index]):
+    for (north, east, radius), valid in zip(core.scen.obstacles[index], core.scen.obstacle_valid[index]):
         if valid:
             cv2.circle(image, pixel(north, east), max(2, int(radius * metres_to_px)), (200, 40, 40), -1)
-    datum = pixel(*core.datum[index])
-    cv2.circle(image, datum, max(3, int(core.datum_sigma[index] * metres_to_px)), (200, 200, 200), 1)
+    datum = pixel(*core.scen.datum[index])
+    cv2.circle(image, datum, max(3, int(core.scen.datum_sigma[index] * metres_to_px)), (200, 200, 200), 1)
     cv2.drawMarker(image, datum, (220, 220, 220), cv2.MARKER_CROSS, 12, 1)
-    for t, (position, category, valid) in enumerate(zip(core.targets[index], core.target_category[index],
-                                                          core.target_valid[index])):
+    for t, (position, category, valid) in enumerate(zip(core.targets[index], core.scen.target_category[index],
+                                                          core.scen.target_valid[index])):
         if valid:
             colour = CATEGORY_COLOURS[CATEGORIES[category]]
             cv2.circle(image, pixel(*position), 4, colour, -1)
-            if t == core.primary_index[index]:
+            if t == core.scen.primary_index[index]:
                 cv2.circle(image, pixel(*position), 9, colour, 2)
     if len(path) > 1:
         points = np.array([pixel(n, e) for n, e in path], dtype=np.int32)
@@ -58,6 +58,7 @@ def render_search(core: "SarSearchBatch", index: int, path: Sequence[tuple[float
         cv2.drawMarker(image, pixel(*core.goal_point[index]), (255, 255, 0), cv2.MARKER_DIAMOND, 14, 2)
         cv2.putText(image, GOAL_NAMES[core.goal[index]], (8, SIZE_PX - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                     (255, 255, 0), 1, cv2.LINE_AA)
-    cv2.putText(image, f"step {int(core.steps[index])}  coverage {search.coverage_ratio(core.coverage)[index]:.0%}",
+    coverage = core.covered_cells[index] / core.coverage[index].size
+    cv2.putText(image, f"step {int(core.steps[index])}  coverage {coverage:.0%}",
                 (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
     return image

@@ -44,28 +44,25 @@ class SarSearchVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"reset: expected {self.num_envs} seeds, got {len(seeds)}")
-        for i, episode_seed in enumerate(seeds):
-            self.core.reset(i, int(episode_seed))
-        obs = self.core.observe().copy()
-        return obs, {"episode_seed": self.core.episode_seed.copy()}
+        self.core.reset(np.arange(self.num_envs), np.asarray(seeds, dtype=np.uint64))
+        return self.core.obs.copy(), {"episode_seed": self.core.episode_seed.copy()}
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self.core.step(np.asarray(actions))
         done = terminated | truncated
         if done.any():
+            finished = np.flatnonzero(done)
             final_obs = np.full(self.num_envs, None, dtype=object)
-            for i in np.flatnonzero(done):
-                final_obs[i] = obs[i].copy()
-                self.core.reset(i, int(next_episode_seed(self.core.episode_seed[i:i + 1])[0]))
+            final_obs[finished] = list(obs[finished])  # copies: rows of a fancy index
             info["final_obs"], info["_final_obs"] = final_obs, done.copy()
-            obs = self.core.observe()
-        return obs.copy(), reward, terminated, truncated, info
+            self.core.reset(finished, next_episode_seed(self.core.episode_seed[finished]))
+        return self.core.obs.copy(), reward, terminated, truncated, info
 
     def set_goals(self, goals: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """HRL-SAC: give the environments in ``mask`` (all by default) a new meta-controller goal; returns the
         observations updated with it."""
         self.core.set_goals(goals, mask)
-        return self.core.observe().copy()
+        return self.core.obs.copy()
 
     @property
     def meta_observation(self) -> np.ndarray:

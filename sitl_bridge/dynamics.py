@@ -1,8 +1,8 @@
 """Multirotor dynamics: a 3-D point mass behind a velocity controller, with wind, battery and ground.
 
-Everything here is a pure function over frozen dataclasses: no I/O, no global randomness, no numpy
-(the SITL calls :func:`step` at 100-250 Hz in pure Python, and float/``math`` is several times faster
-than numpy on scalars).
+Everything here is a pure function over frozen dataclasses: no I/O, no global randomness. The SITL calls
+:func:`step` (one vehicle, floats, with ground contact) at 100-250 Hz; the training environment calls
+:func:`step_batch` (N airborne vehicles, numpy arrays). Both run the same airborne physics code.
 
 The model, per axis group (horizontal = 2-D vector, vertical = 1-D):
 
@@ -10,7 +10,7 @@ The model, per axis group (horizontal = 2-D vector, vertical = 1-D):
   constant ``tau``, i.e. ``dv/dt = (c - v) / tau``, except that ``|dv/dt|`` is capped at ``a_max``.
   With ``c`` constant the error ``e = c - v`` keeps its direction and its magnitude follows
   phase 1 (``|e| > a_max * tau``): linear decrease at ``a_max``; phase 2: ``|e| = |e0| exp(-t / tau)``.
-  Both phases have closed-form position integrals, so :func:`step` is EXACT for any step size: one
+  Both phases have closed-form position integrals, so a step is EXACT for any step size: one
   1 s step equals 100 steps of 10 ms to rounding error. Every other ingredient is chosen to keep that
   property (gusts are a function of absolute time, power is constant while the command is, touchdown
   is found by a root find on the closed-form trajectory, the stored acceleration is instantaneous).
@@ -18,30 +18,49 @@ The model, per axis group (horizontal = 2-D vector, vertical = 1-D):
   fraction ``gust_response`` of the horizontal gusts leaks through as ground velocity. The altitude
   loop is modelled as rejecting vertical gusts entirely (a multirotor's thrust acts directly on that
   axis), which also means a gust can never push a vehicle through the ground.
-* Ground: flat at ``down = 0``. On the ground (armed, no climb command) the vehicle rests: zero
-  velocity, no sliding, no yawing. A climb command lifts off from rest. While armed, touching the
-  ground ends the flight for the rest of the step (or lifts off again at once if the command climbs).
-* Disarmed: motors off. On the ground nothing but time moves; in the air the vehicle falls
-  ballistically (gravity, no drag, horizontal velocity kept, gusts still drift it) until it hits the
-  ground. The autopilot is not expected to disarm in the air; this only keeps the state consistent.
+* Ground (:func:`step` only): flat at ``down = 0``. On the ground (armed, no climb command) the vehicle
+  rests: no motion, no yawing. A climb command lifts off from rest. While armed, touching the ground
+  ends the flight for the rest of the step (or lifts off again at once if the command climbs).
+* Disarmed (:func:`step` only): motors off. On the ground nothing but time moves; in the air the vehicle
+  falls ballistically (no drag, horizontal velocity kept, gusts still drift it) until it hits the ground.
+
+The backend trick: the airborne physics (section "Shared airborne physics") is written once, with no
+Python ``if`` on values: only arithmetic, ``abs`` and ``xp.where/minimum/maximum/clip/isfinite/hypot/
+copysign/expm1/cos/fmod``. With ``xp=numpy`` it steps arrays of N vehicles (:func:`step_batch`); with
+``xp=_Scalar`` (the same names for Python floats) one vehicle, nearly as fast as plain scalar code.
 """
 from __future__ import annotations
 
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+
+import numpy as np
 
 GRAVITY_MPS2 = 9.80665
 GUSTS_PER_AXIS = 3
 GUST_PERIOD_RANGE_S = (3.0, 30.0)
 VERTICAL_GUST_FRACTION = 0.3  # vertical gusts are this fraction of the horizontal ones
-_TWO_PI = 2.0 * math.pi
+_PI, _TWO_PI = math.pi, 2.0 * math.pi
 
 
-def _wrap(angle_rad: float) -> float:
-    """Wrap an angle to (-pi, pi]."""
-    wrapped = math.remainder(angle_rad, _TWO_PI)  # in [-pi, pi]
-    return math.pi if wrapped == -math.pi else wrapped
+class _Scalar:
+    """numpy's names for the functions the shared physics uses, for Python floats: ``math`` and conditional
+    expressions (faster than numpy or min/max on one float). As with numpy, all arguments are evaluated."""
+
+    isfinite, hypot, copysign = math.isfinite, math.hypot, math.copysign
+    expm1, cos, fmod = math.expm1, math.cos, math.fmod
+    where = staticmethod(lambda condition, if_true, if_false: if_true if condition else if_false)
+    minimum = staticmethod(lambda a, b: a if a < b else b)
+    maximum = staticmethod(lambda a, b: a if a > b else b)
+    clip = staticmethod(lambda x, lo, hi: lo if x < lo else hi if x > hi else x)
+
+
+def _wrap(angle_rad, xp=_Scalar):
+    """Wrap an angle to (-pi, pi], exactly (fmod is exact, and so is the one +-2pi correction)."""
+    r = xp.fmod(angle_rad, _TWO_PI)  # in (-2pi, 2pi)
+    return xp.where(r > _PI, r - _TWO_PI, xp.where(r <= -_PI, r + _TWO_PI, r))
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,21 +142,14 @@ class Wind:
 
     def gust_displacement(self, t0_s: float, t1_s: float) -> tuple[float, float, float]:
         """Exact integral of :meth:`gust_velocity` from ``t0_s`` to ``t1_s`` (NED, m)."""
-        north, east, down = self._terms
-        return _axis_displacement(north, t0_s, t1_s), _axis_displacement(east, t0_s, t1_s), \
-            _axis_displacement(down, t0_s, t1_s)
-
-    def horizontal_gust_displacement(self, t0_s: float, t1_s: float) -> tuple[float, float]:
-        """North and east parts of :meth:`gust_displacement` (the hot path needs only these)."""
-        return _axis_displacement(self._terms[0], t0_s, t1_s), _axis_displacement(self._terms[1], t0_s, t1_s)
+        return tuple(_axis_displacement(axis, t0_s, t1_s) for axis in self._terms)  # type: ignore[return-value]
 
 
-def _axis_displacement(terms: tuple, t0_s: float, t1_s: float) -> float:
+def _axis_displacement(terms: tuple, t0_s, t1_s, xp=_Scalar):
     """Integral over [t0, t1] of sum(a * sin(w t + ph)) = sum(a / w * (cos(w t0 + ph) - cos(w t1 + ph)))."""
-    cos = math.cos
     total = 0.0
-    for _, w, ph, a_over_w in terms:  # a plain loop: measurably faster than sum() over a generator
-        total += a_over_w * (cos(w * t0_s + ph) - cos(w * t1_s + ph))
+    for _, w, ph, a_over_w in terms:  # the few sinusoids of one axis (a loop over terms, not vehicles)
+        total = total + a_over_w * (xp.cos(w * t0_s + ph) - xp.cos(w * t1_s + ph))
     return total
 
 
@@ -180,51 +192,113 @@ class VelocityCommand:
 HOVER = VelocityCommand()
 
 
-_Clamped = tuple[float, float, float, float | None, float | None]
+# Shared airborne physics (backend-generic: xp = _Scalar or numpy) -----------------------------------
+def _clamp_velocity(n, e, d, params: MultirotorParams, xp=_Scalar):
+    """Commanded velocity with non-finite parts zeroed (garbage stops the vehicle), the horizontal
+    speed limited keeping the direction, and the climb/descent rates limited."""
+    finite, where = xp.isfinite, xp.where
+    n, e, d = where(finite(n), n, 0.0), where(finite(e), e, 0.0), where(finite(d), d, 0.0)
+    limit = params.max_speed_xy_mps
+    scale = limit / xp.maximum(xp.hypot(n, e), limit)  # exactly 1 within the limit
+    return n * scale, e * scale, xp.clip(d, -params.max_speed_up_mps, params.max_speed_down_mps)
 
 
-def _clamped(cmd: VelocityCommand, params: MultirotorParams) -> _Clamped:
+def _clamp_yaw_rate(rate, params: MultirotorParams, xp=_Scalar):
+    """Yaw-rate command limited to the max yaw rate; non-finite becomes 0 (hold)."""
+    limit = params.max_yaw_rate_rad_s
+    return xp.where(xp.isfinite(rate), xp.clip(rate, -limit, limit), 0.0)
+
+
+def _track(e0, a_max: float, tau: float, t, xp=_Scalar):
+    """Velocity-error magnitude after ``t`` s, and its integral over [0, t], starting from ``e0 >= 0``.
+
+    Phase 1 (error above ``a_max * tau``, where the first-order law would ask for more than ``a_max``)
+    lasts ``t_lin``, clipped to [0, t]; the exponential phase 2 takes the rest (possibly 0 s).
+    """
+    t_lin = xp.clip((e0 - a_max * tau) / a_max, 0.0, t)
+    e_mid = e0 - a_max * t_lin  # error when phase 1 ends (or at t)
+    shrink = xp.expm1((t_lin - t) / tau)  # exp(-t2/tau) - 1, accurate for small t2 = t - t_lin
+    return e_mid * (1.0 + shrink), t_lin * (e0 - 0.5 * a_max * t_lin) - e_mid * tau * shrink
+
+
+def _airborne(n, e, d, vn, ve, vd, cn, ce, cd, t0, t, params: MultirotorParams, wind: Wind, xp=_Scalar):
+    """Fly ``t`` s from time ``t0`` with the clamped command ``(cn, ce, cd)`` held, ignoring the ground:
+    (n, e, d, vn, ve, vd, an, ae, ad) at ``t0 + t``."""
+    tau = params.velocity_time_constant_s
+    # Vertical: the error shrinks toward zero from either side.
+    a_z = params.max_accel_z_mps2
+    err = cd - vd
+    sign = xp.copysign(1.0, err)
+    e_t, integral = _track(abs(err), a_z, tau, t, xp)
+    d1 = d + cd * t - sign * integral
+    vd1 = cd - sign * e_t
+    ad = sign * xp.minimum(a_z, e_t / tau)
+    # Horizontal: the error shrinks along its initial direction (unit vector u; u = 0 without error).
+    a_xy = params.max_accel_xy_mps2
+    en, ee = cn - vn, ce - ve
+    e0 = xp.hypot(en, ee)
+    length = xp.where(e0 > 0.0, e0, 1.0)
+    un, ue = en / length, ee / length
+    e_t, integral = _track(e0, a_xy, tau, t, xp)
+    n1, e1 = n + cn * t - un * integral, e + ce * t - ue * integral
+    vn1, ve1 = cn - un * e_t, ce - ue * e_t
+    accel = xp.minimum(a_xy, e_t / tau)
+    gn, ge = _gust_drift(params, wind, t0, t0 + t, xp)
+    return n1 + gn, e1 + ge, d1, vn1, ve1, vd1, un * accel, ue * accel, ad
+
+
+def _gust_drift(params: MultirotorParams, wind: Wind, t0, t1, xp=_Scalar):
+    """Horizontal displacement (north, east; m) over [t0, t1] by the gusts the controller lets through."""
+    if wind.gust_mps == 0.0 or params.gust_response == 0.0:  # (parameters, not state: no per-vehicle if)
+        return 0.0, 0.0
+    north, east, _ = wind._terms
+    r = params.gust_response
+    return r * _axis_displacement(north, t0, t1, xp), r * _axis_displacement(east, t0, t1, xp)
+
+
+def _turn_toward(yaw, target, max_rate: float, t, xp=_Scalar):
+    """Heading after ``t`` s of turning toward the (wrapped) ``target`` at the max rate, shortest way."""
+    diff = _wrap(target - yaw, xp)
+    turn = max_rate * t
+    return xp.where(abs(diff) <= turn, target, _wrap(yaw + xp.copysign(turn, diff), xp))
+
+
+def _turn_at(yaw, rate, t, xp=_Scalar):
+    """Heading after ``t`` s of turning at the (clamped) ``rate``."""
+    return _wrap(yaw + rate * t, xp)
+
+
+def _airborne_power_w(cn, ce, cd, params: MultirotorParams, wind: Wind, xp=_Scalar):
+    """Power while flying a (clamped) command: hover + airspeed^2 + climb terms (steady wind only)."""
+    airspeed2 = (cn - wind.north_mps) ** 2 + (ce - wind.east_mps) ** 2
+    return (params.hover_power_w + params.power_per_airspeed2_w * airspeed2
+            + params.climb_power_w_per_mps * xp.maximum(0.0, -cd))
+
+
+def _battery_after(battery_wh, power_w, duration_s, xp=_Scalar):
+    """Energy left after drawing ``power_w`` for ``duration_s`` (never below empty)."""
+    return xp.maximum(0.0, battery_wh - power_w * duration_s / 3600.0)
+
+
+# One vehicle, with ground contact and disarming (the SITL) ----------------------------------------
+def _clamped(cmd: VelocityCommand, params: MultirotorParams) -> tuple:
     """The command's limited values as a plain tuple (north, east, down, yaw, yaw_rate).
 
     Non-finite numbers (NaN, inf) become 0 for velocities and yaw rate and ``None`` (hold heading)
     for an absolute yaw: a garbage setpoint should stop the vehicle, not point it anywhere.
     """
-    n, e, d = cmd.north_mps, cmd.east_mps, cmd.down_mps
-    n = n if math.isfinite(n) else 0.0
-    e = e if math.isfinite(e) else 0.0
-    d = d if math.isfinite(d) else 0.0
-    speed = math.hypot(n, e)
-    if speed > params.max_speed_xy_mps:  # scale the vector so the direction is kept
-        scale = params.max_speed_xy_mps / speed
-        n, e = n * scale, e * scale
-    d = min(max(d, -params.max_speed_up_mps), params.max_speed_down_mps)
+    n, e, d = _clamp_velocity(cmd.north_mps, cmd.east_mps, cmd.down_mps, params)
     yaw, rate = cmd.yaw_rad, cmd.yaw_rate_rad_s
     if yaw is not None:
         yaw = _wrap(yaw) if math.isfinite(yaw) else None
     if rate is not None:
-        limit = params.max_yaw_rate_rad_s
-        rate = min(max(rate, -limit), limit) if math.isfinite(rate) else 0.0
+        rate = _clamp_yaw_rate(rate, params)
     return n, e, d, yaw, rate
 
 
 def clamp_command(cmd: VelocityCommand, params: MultirotorParams) -> VelocityCommand:
     """The command :func:`step` actually flies: speed, climb/descent and yaw-rate limits applied."""
     return VelocityCommand(*_clamped(cmd, params))
-
-
-def _track(e0: float, a_max: float, tau: float, t: float) -> tuple[float, float]:
-    """Velocity-error magnitude after ``t`` s, and its integral over [0, t], starting from ``e0``."""
-    e_knee = a_max * tau  # above this, the first-order law would ask for more than a_max
-    integral = 0.0
-    if e0 > e_knee:  # phase 1: constant acceleration a_max
-        t_knee = (e0 - e_knee) / a_max
-        if t <= t_knee:
-            return e0 - a_max * t, t * (e0 - 0.5 * a_max * t)
-        integral = 0.5 * (e0 + e_knee) * t_knee
-        t -= t_knee
-        e0 = e_knee
-    shrink = math.expm1(-t / tau)  # exp(-t/tau) - 1, accurate for small t
-    return e0 * (1.0 + shrink), integral - e0 * tau * shrink  # phase 2: exponential decay
 
 
 def _time_to_error(e0: float, e_target: float, a_max: float, tau: float) -> float:
@@ -270,10 +344,7 @@ def _touchdown_time(d0: float, vd0: float, cd: float, a_max: float, tau: float, 
     s = hi
     for _ in range(100):
         d, vd = down_and_rate(s)
-        if d >= 0.0:
-            hi = s
-        else:
-            lo = s
+        lo, hi = (lo, s) if d >= 0.0 else (s, hi)
         newton = s - d / vd if vd > 0.0 else lo - 1.0
         nxt = newton if lo < newton < hi else 0.5 * (lo + hi)
         if abs(nxt - s) < 1e-13 or hi - lo < 1e-12:
@@ -282,22 +353,10 @@ def _touchdown_time(d0: float, vd0: float, cd: float, a_max: float, tau: float, 
     return hi
 
 
-def _yaw_after(yaw: float, target: float | None, rate: float | None, max_rate: float, t: float) -> float:
-    """Heading after ``t`` s of turning toward ``target`` (shortest way) or at ``rate``."""
-    if target is not None:
-        diff = _wrap(target - yaw)
-        turn = max_rate * t
-        return target if abs(diff) <= turn else _wrap(yaw + math.copysign(turn, diff))
-    if rate:
-        return _wrap(yaw + rate * t)
-    return yaw
-
-
-def _airborne_power_w(cn: float, ce: float, cd: float, params: MultirotorParams, wind: Wind) -> float:
-    """Power while flying a (clamped) command: hover + airspeed^2 + climb terms (steady wind only)."""
-    airspeed2 = (cn - wind.north_mps) ** 2 + (ce - wind.east_mps) ** 2
-    return (params.hover_power_w + params.power_per_airspeed2_w * airspeed2
-            + params.climb_power_w_per_mps * max(0.0, -cd))
+def _may_touch_down(d, vd, cd, duration, xp=_Scalar):
+    """False where the ground is surely out of reach: vd moves monotonically from vd toward cd, so the
+    descent rate never exceeds max(vd, cd). Skips the root find in the common case (high above it)."""
+    return d + xp.maximum(xp.maximum(vd, cd), 0.0) * duration >= 0.0
 
 
 def power_w(state: VehicleState, cmd: VelocityCommand, params: MultirotorParams, wind: Wind,
@@ -317,48 +376,18 @@ def power_w(state: VehicleState, cmd: VelocityCommand, params: MultirotorParams,
 
 def _fly(n: float, e: float, d: float, vn: float, ve: float, vd: float, cn: float, ce: float, cd: float,
          t0: float, duration: float, params: MultirotorParams, wind: Wind) -> tuple:
-    """Armed flight for up to ``duration`` s from time ``t0``; stops at touchdown.
-
-    Returns (time flown, n, e, d, vn, ve, vd, an, ae, ad, touched_down).
+    """Armed flight for up to ``duration`` s from time ``t0``: the shared airborne physics, cut short
+    (and stopped: no sliding) at touchdown. Returns (time flown, n, e, d, vn, ve, vd, an, ae, ad, landed).
     """
-    tau = params.velocity_time_constant_s
-    a_z = params.max_accel_z_mps2
-    flown = duration
     touchdown = None
-    # vd moves monotonically from vd toward cd, so the descent rate never exceeds max(vd, cd): skip the
-    # root find (the common case, well above the ground) when even that cannot reach the ground.
-    if d + max(vd, cd, 0.0) * duration >= 0.0:
-        touchdown = _touchdown_time(d, vd, cd, a_z, tau, duration)
-    if touchdown is not None:
-        flown = touchdown
-        d1, vd1, ad = 0.0, 0.0, 0.0
-    else:
-        err = cd - vd
-        sign = math.copysign(1.0, err)
-        e_t, integral = _track(abs(err), a_z, tau, flown)
-        d1 = min(0.0, d + cd * flown - sign * integral)
-        vd1 = cd - sign * e_t
-        ad = sign * min(a_z, e_t / tau)
-    # Horizontal: the error shrinks along its initial direction.
-    en, ee = cn - vn, ce - ve
-    e0 = math.hypot(en, ee)
-    n1, e1 = n + cn * flown, e + ce * flown
-    if e0 > 0.0:
-        un, ue = en / e0, ee / e0
-        e_t, integral = _track(e0, params.max_accel_xy_mps2, tau, flown)
-        n1, e1 = n1 - un * integral, e1 - ue * integral
-        vn1, ve1 = cn - un * e_t, ce - ue * e_t
-        accel = min(params.max_accel_xy_mps2, e_t / tau)
-        an, ae = un * accel, ue * accel
-    else:
-        vn1, ve1, an, ae = cn, ce, 0.0, 0.0
-    if wind.gust_mps > 0.0 and params.gust_response > 0.0:
-        gn, ge = wind.horizontal_gust_displacement(t0, t0 + flown)
-        n1 += params.gust_response * gn
-        e1 += params.gust_response * ge
-    if touchdown is not None:  # no sliding: the ground stops the vehicle
-        vn1, ve1, an, ae = 0.0, 0.0, 0.0, 0.0
-    return flown, n1, e1, d1, vn1, ve1, vd1, an, ae, ad, touchdown is not None
+    if _may_touch_down(d, vd, cd, duration):
+        touchdown = _touchdown_time(d, vd, cd, params.max_accel_z_mps2, params.velocity_time_constant_s,
+                                    duration)
+    if touchdown is None:
+        n, e, d, vn, ve, vd, an, ae, ad = _airborne(n, e, d, vn, ve, vd, cn, ce, cd, t0, duration, params, wind)
+        return duration, n, e, min(d, 0.0), vn, ve, vd, an, ae, ad, False
+    n, e, *_ = _airborne(n, e, d, vn, ve, vd, cn, ce, cd, t0, touchdown, params, wind)
+    return touchdown, n, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
 
 
 def _fall(state: VehicleState, params: MultirotorParams, wind: Wind, dt_s: float) -> VehicleState:
@@ -371,11 +400,8 @@ def _fall(state: VehicleState, params: MultirotorParams, wind: Wind, dt_s: float
     else:
         t_hit = -2.0 * d0 / (vd0 + root) if root > 0.0 else 0.0
     flown = min(dt_s, t_hit)
-    n1, e1 = state.north_m + state.vn_mps * flown, state.east_m + state.ve_mps * flown
-    if wind.gust_mps > 0.0 and params.gust_response > 0.0:
-        gn, ge = wind.horizontal_gust_displacement(state.time_s, state.time_s + flown)
-        n1 += params.gust_response * gn
-        e1 += params.gust_response * ge
+    gn, ge = _gust_drift(params, wind, state.time_s, state.time_s + flown)
+    n1, e1 = state.north_m + state.vn_mps * flown + gn, state.east_m + state.ve_mps * flown + ge
     t1 = state.time_s + dt_s
     if t_hit <= dt_s:
         return VehicleState(t1, n1, e1, 0.0, 0.0, 0.0, 0.0, state.yaw_rad, 0.0, 0.0, 0.0, state.battery_wh,
@@ -401,7 +427,7 @@ def step(state: VehicleState, cmd: VelocityCommand, params: MultirotorParams, wi
     climbing = cd < 0.0
     if state.on_ground:
         if not climbing:  # rest: only time and the idle drain move
-            battery = max(0.0, state.battery_wh - params.idle_power_w * dt_s / 3600.0)
+            battery = _battery_after(state.battery_wh, params.idle_power_w, dt_s)
             return VehicleState(t0 + dt_s, state.north_m, state.east_m, 0.0, 0.0, 0.0, 0.0, state.yaw_rad,
                                 0.0, 0.0, 0.0, battery, True)
         # Lift off from rest.
@@ -409,19 +435,132 @@ def step(state: VehicleState, cmd: VelocityCommand, params: MultirotorParams, wi
     else:
         flight = _fly(state.north_m, state.east_m, min(state.down_m, 0.0), state.vn_mps, state.ve_mps,
                       state.vd_mps, cn, ce, cd, t0, dt_s, params, wind)
-    flown, n, e, d, vn, ve, vd, an, ae, ad, landed = flight
-    airborne_s = flown
-    if landed and climbing and flown < dt_s:
+    airborne_s, n, e, d, vn, ve, vd, an, ae, ad, landed = flight
+    if landed and climbing and airborne_s < dt_s:
         # Touched down while still commanded to climb (e.g. braking a descent too close to the
         # ground): lift off again at once, exactly as the next step would.
-        flight = _fly(n, e, 0.0, 0.0, 0.0, 0.0, cn, ce, cd, t0 + flown, dt_s - flown, params, wind)
+        flight = _fly(n, e, 0.0, 0.0, 0.0, 0.0, cn, ce, cd, t0 + airborne_s, dt_s - airborne_s, params, wind)
         _, n, e, d, vn, ve, vd, an, ae, ad, landed = flight
         airborne_s = dt_s
-    energy_wh = (_airborne_power_w(cn, ce, cd, params, wind) * airborne_s
-                 + params.idle_power_w * (dt_s - airborne_s)) / 3600.0
-    yaw = _yaw_after(state.yaw_rad, yaw_target, yaw_rate, params.max_yaw_rate_rad_s, airborne_s)
-    battery = max(0.0, state.battery_wh - energy_wh)
+    battery = _battery_after(state.battery_wh, _airborne_power_w(cn, ce, cd, params, wind), airborne_s)
+    if airborne_s < dt_s:  # resting on the ground for the rest of the step
+        battery = _battery_after(battery, params.idle_power_w, dt_s - airborne_s)
+    yaw = state.yaw_rad  # no yaw command (and no yawing on the ground): hold
+    if yaw_target is not None:
+        yaw = _turn_toward(yaw, yaw_target, params.max_yaw_rate_rad_s, airborne_s)
+    elif yaw_rate is not None:
+        yaw = _turn_at(yaw, yaw_rate, airborne_s)
     return VehicleState(t0 + dt_s, n, e, d, vn, ve, vd, yaw, an, ae, ad, battery, landed)
+
+
+# N airborne vehicles at once (the training environment) ------------------------------------------
+_BATCH_FIELDS = ("north_m", "east_m", "down_m", "vn_mps", "ve_mps", "vd_mps", "yaw_rad", "battery_wh")
+
+
+@dataclass(slots=True)
+class BatchState:
+    """N airborne vehicles: float64 arrays of shape (N,), fields as in :class:`VehicleState`. The caller
+    keeps the time (see :func:`step_batch`); accelerations (used only by :func:`attitude`) are not kept."""
+
+    north_m: np.ndarray
+    east_m: np.ndarray
+    down_m: np.ndarray
+    vn_mps: np.ndarray
+    ve_mps: np.ndarray
+    vd_mps: np.ndarray
+    yaw_rad: np.ndarray
+    battery_wh: np.ndarray
+
+    @classmethod
+    def from_states(cls, states: Sequence[VehicleState]) -> BatchState:
+        """Stack airborne scalar states (``on_ground`` ones are rejected: the batch has no ground)."""
+        grounded = [i for i, s in enumerate(states) if s.on_ground]
+        if grounded:
+            raise ValueError(f"BatchState.from_states: states {grounded[:5]} are on the ground")
+        return cls(*(np.array([getattr(s, name) for s in states], dtype=np.float64) for name in _BATCH_FIELDS))
+
+    def state(self, i: int, time_s: float = 0.0) -> VehicleState:
+        """Vehicle ``i`` as a :class:`VehicleState` at ``time_s``: airborne, accelerations 0."""
+        n, e, d, vn, ve, vd, yaw, battery = (float(getattr(self, name)[i]) for name in _BATCH_FIELDS)
+        return VehicleState(time_s, n, e, d, vn, ve, vd, yaw, 0.0, 0.0, 0.0, battery, on_ground=False)
+
+    def set(self, i: int, state: VehicleState) -> None:
+        """Overwrite vehicle ``i`` with an airborne scalar state (an environment reset)."""
+        if state.on_ground:
+            raise ValueError("BatchState.set: the state is on the ground")
+        for name in _BATCH_FIELDS:
+            getattr(self, name)[i] = getattr(state, name)
+
+    def copy(self) -> BatchState:
+        """An independent copy (new arrays)."""
+        return BatchState(*(getattr(self, name).copy() for name in _BATCH_FIELDS))
+
+
+def step_batch(state: BatchState, cmd_north, cmd_east, cmd_down, params: MultirotorParams, wind: Wind,
+               t0_s: float | np.ndarray, dt_s: float, out: BatchState | None = None, *,
+               cmd_yaw_rad=None, cmd_yaw_rate_rad_s=None) -> BatchState:
+    """Advance N AIRBORNE vehicles by ``dt_s`` with their velocity commands (NED, m/s, arrays or floats)
+    held: the same physics, to rounding, as ``step(state.state(i, t0_s[i]), VelocityCommand(...))`` each.
+
+    ``t0_s`` is each vehicle's absolute time at the start (a float or an (N,) array; it sets the gust
+    phase; the caller advances it). Heading is held unless ``cmd_yaw_rate_rad_s`` and/or ``cmd_yaw_rad``
+    are given, with :class:`VelocityCommand`'s rules (a finite heading target wins over the rate).
+    Ground contact is NOT modelled: callers must keep the vehicles airborne; a ValueError is raised if
+    any vehicle would touch the ground during the step (a vectorised bound, confirmed per flagged vehicle
+    by the touchdown search :func:`step` uses). Results go to ``out`` (may be ``state``) or new arrays.
+    """
+    if not 0.0 <= dt_s < math.inf:
+        raise ValueError(f"dt_s must be finite and >= 0, got {dt_s}")
+    if state.north_m.shape == (1,):  # one vehicle (the single environment): numpy's per-call overhead
+        return _step_one(state, cmd_north, cmd_east, cmd_down, params, wind, t0_s, dt_s, out,  # would dominate
+                         cmd_yaw_rad, cmd_yaw_rate_rad_s)
+    s, xp = state, np
+    cn, ce, cd = _clamp_velocity(np.asarray(cmd_north, np.float64), np.asarray(cmd_east, np.float64),
+                                 np.asarray(cmd_down, np.float64), params, xp)
+    cd = np.broadcast_to(cd, s.down_m.shape)
+    for i in np.flatnonzero(_may_touch_down(s.down_m, s.vd_mps, cd, dt_s, xp)):
+        if s.down_m[i] > 0.0 or _touchdown_time(float(s.down_m[i]), float(s.vd_mps[i]), float(cd[i]),
+                                                params.max_accel_z_mps2, params.velocity_time_constant_s,
+                                                dt_s) is not None:
+            raise ValueError(f"step_batch: vehicle {i} (down_m={s.down_m[i]:.3f}, vd_mps={s.vd_mps[i]:.3f}) "
+                             f"would touch the ground; step_batch models airborne flight only")
+    n, e, d, vn, ve, vd, _, _, _ = _airborne(s.north_m, s.east_m, s.down_m, s.vn_mps, s.ve_mps, s.vd_mps,
+                                             cn, ce, cd, t0_s, dt_s, params, wind, xp)
+    battery = _battery_after(s.battery_wh, _airborne_power_w(cn, ce, cd, params, wind, xp), dt_s, xp)
+    yaw = s.yaw_rad
+    if cmd_yaw_rate_rad_s is not None:
+        yaw = _turn_at(yaw, _clamp_yaw_rate(np.asarray(cmd_yaw_rate_rad_s, np.float64), params, xp), dt_s, xp)
+    if cmd_yaw_rad is not None:  # where a target is given it wins over the rate, as in step()
+        target = np.asarray(cmd_yaw_rad, np.float64)
+        has_target = np.isfinite(target)
+        target = _wrap(np.where(has_target, target, 0.0), xp)
+        yaw = np.where(has_target, _turn_toward(s.yaw_rad, target, params.max_yaw_rate_rad_s, dt_s, xp), yaw)
+    if out is None:
+        out = BatchState(*(np.empty(s.north_m.shape) for _ in _BATCH_FIELDS))
+    for name, value in zip(_BATCH_FIELDS, (n, e, d, vn, ve, vd, yaw, battery)):
+        getattr(out, name)[...] = value
+    return out
+
+
+def _step_one(state: BatchState, cmd_north, cmd_east, cmd_down, params: MultirotorParams, wind: Wind, t0_s,
+              dt_s: float, out: BatchState | None, cmd_yaw_rad, cmd_yaw_rate_rad_s) -> BatchState:
+    """:func:`step_batch` for N = 1 through the scalar backend (the same shared physics, via :func:`step`)."""
+    def first(value):
+        if value is None:
+            return None
+        return float(value[0]) if isinstance(value, np.ndarray) and value.ndim else float(value)
+
+    yaw = first(cmd_yaw_rad)
+    command = VelocityCommand(first(cmd_north), first(cmd_east), first(cmd_down),
+                              yaw if yaw is not None and math.isfinite(yaw) else None, first(cmd_yaw_rate_rad_s))
+    after = step(state.state(0, first(t0_s)), command, params, wind, dt_s)
+    if after.on_ground or state.down_m[0] > 0.0:
+        raise ValueError(f"step_batch: vehicle 0 (down_m={state.down_m[0]:.3f}, vd_mps={state.vd_mps[0]:.3f}) "
+                         f"would touch the ground; step_batch models airborne flight only")
+    if out is None:
+        out = BatchState(*(np.empty(1) for _ in _BATCH_FIELDS))
+    out.set(0, after)
+    return out
 
 
 def ground_velocity(state: VehicleState, params: MultirotorParams, wind: Wind) -> tuple[float, float, float]:

@@ -1,15 +1,19 @@
-"""Tests for the multirotor dynamics: step-size exactness, limits, ground contact, wind, battery, attitude."""
+"""Tests for the multirotor dynamics: step-size exactness, limits, ground contact, wind, battery, attitude,
+and the batch API (N airborne vehicles with numpy) agreeing with the scalar step."""
 from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sitl_bridge.dynamics import (
     HOVER,
+    BatchState,
     MultirotorParams,
     VehicleState,
     VelocityCommand,
@@ -19,6 +23,7 @@ from sitl_bridge.dynamics import (
     ground_velocity,
     power_w,
     step,
+    step_batch,
     velocity_toward,
 )
 
@@ -372,3 +377,114 @@ def test_velocity_toward_respects_requested_speeds():
     cmd = velocity_toward(state, 100.0, 0.0, -100.0, PARAMS, speed_xy_mps=4.0, speed_z_mps=1.0)
     assert (cmd.north_mps, cmd.east_mps, cmd.down_mps) == pytest.approx((4.0, 0.0, -1.0))
     assert velocity_toward(state, 0.0, 0.0, -20.0, PARAMS, speed_xy_mps=4.0) == VelocityCommand(0.0, 0.0, 0.0)
+
+
+# Batch API: N airborne vehicles at once, the same physics as step() ----------------------------------
+def random_fleet(rng: np.random.Generator, n: int) -> tuple[list[VehicleState], np.ndarray]:
+    """N airborne vehicles well above the ground, many far from their commands (acceleration-limited),
+    some beyond the speed limits or nearly out of battery; and each one's own clock (gust phase)."""
+    times = rng.uniform(0.0, 500.0, n)
+    states = [airborne(time_s=float(t), down_m=rng.uniform(-200.0, -60.0), north_m=rng.uniform(-100.0, 100.0),
+                       east_m=rng.uniform(-100.0, 100.0), vn_mps=rng.uniform(-15.0, 15.0),
+                       ve_mps=rng.uniform(-15.0, 15.0), vd_mps=rng.uniform(-4.0, 4.0),
+                       yaw_rad=rng.uniform(-math.pi, math.pi), battery_wh=rng.choice([90.0, 30.0, 0.01]))
+                   for t in times]
+    return states, times
+
+
+def random_commands(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
+    """(n, 3) NED velocity commands up to ``scale`` m/s, a few of them non-finite."""
+    cmd = rng.uniform(-scale, scale, (n, 3))
+    cmd[rng.random((n, 3)) < 0.03] = rng.choice([math.nan, math.inf, -math.inf])
+    return cmd
+
+
+def assert_batch_matches(batch: BatchState, states: list[VehicleState], tol: float) -> None:
+    for i, expected in enumerate(states):
+        got = batch.state(i, expected.time_s)
+        for name in ("north_m", "east_m", "down_m", "vn_mps", "ve_mps", "vd_mps", "battery_wh"):
+            assert getattr(got, name) == pytest.approx(getattr(expected, name), abs=tol), (i, name)
+        assert abs(math.remainder(got.yaw_rad - expected.yaw_rad, 2 * math.pi)) < tol, (i, "yaw_rad")
+        assert -math.pi < got.yaw_rad <= math.pi
+
+
+@pytest.mark.parametrize("yaw_mode", ["hold", "rate", "target"])
+@pytest.mark.parametrize("wind", [CALM, GUSTY], ids=["calm", "gusty"])
+@pytest.mark.parametrize("dt", [1.0, 0.37, 0.01])
+def test_step_batch_equals_scalar_steps(dt, wind, yaw_mode):
+    n = 64
+    rng = np.random.default_rng(int(dt * 100) + 7 * len(yaw_mode) + (wind is GUSTY))
+    states, times = random_fleet(rng, n)
+    cmd = random_commands(rng, n, 20.0)
+    rates = np.where(rng.random(n) < 0.1, math.nan, rng.uniform(-3.0, 3.0, n))  # beyond the limit too
+    targets = np.where(rng.random(n) < 0.2, math.nan, rng.uniform(-10.0, 10.0, n))  # NaN: use the rate
+    yaw_kwargs = {"hold": {}, "rate": {"cmd_yaw_rate_rad_s": rates},
+                  "target": {"cmd_yaw_rad": targets, "cmd_yaw_rate_rad_s": rates}}[yaw_mode]
+    batch = step_batch(BatchState.from_states(states), cmd[:, 0], cmd[:, 1], cmd[:, 2], PARAMS, wind,
+                       times, dt, **yaw_kwargs)
+    expected = []
+    for i, state in enumerate(states):
+        command = VelocityCommand(*cmd[i], yaw_rad=float(targets[i]) if yaw_mode == "target" else None,
+                                  yaw_rate_rad_s=float(rates[i]) if yaw_mode != "hold" else None)
+        expected.append(step(state, command, PARAMS, wind, dt))
+    assert_batch_matches(batch, expected, tol=1e-12)
+    # The acceleration limits were active for many vehicles (phase 1 of the velocity tracking).
+    knee = PARAMS.max_accel_xy_mps2 * PARAMS.velocity_time_constant_s
+    clamped = [clamp_command(VelocityCommand(*c), PARAMS) for c in cmd]
+    far = sum(math.hypot(c.north_mps - s.vn_mps, c.east_mps - s.ve_mps) > 2 * knee for c, s in zip(clamped, states))
+    assert far > n // 4
+
+
+def test_step_batch_one_big_step_equals_many_small_steps():
+    n, total = 48, 3.0
+    rng = np.random.default_rng(11)
+    states, times = random_fleet(rng, n)
+    cmd = random_commands(rng, n, 20.0)
+    rates = rng.uniform(-2.0, 2.0, n)  # turns through +-pi within the 3 s
+    start = BatchState.from_states(states)
+    big = step_batch(start, *cmd.T, PARAMS, GUSTY, times, total, cmd_yaw_rate_rad_s=rates)
+    for durations in splits(total):
+        fleet, clock = start.copy(), times.copy()
+        for dt in durations:
+            step_batch(fleet, *cmd.T, PARAMS, GUSTY, clock, dt, out=fleet, cmd_yaw_rate_rad_s=rates)  # in place
+            clock += dt
+        assert_batch_matches(fleet, [big.state(i, times[i] + total) for i in range(n)], tol=TOL)
+    assert np.array_equal(start.north_m, np.array([s.north_m for s in states]))  # input left alone
+
+
+def test_batch_state_round_trip_and_validation():
+    states, _ = random_fleet(np.random.default_rng(2), 5)
+    batch = BatchState.from_states(states)
+    assert batch.north_m.dtype == np.float64 and batch.north_m.shape == (5,)
+    for i, state in enumerate(states):  # accelerations are not kept by the batch
+        assert batch.state(i, state.time_s) == replace(state, an_mps2=0.0, ae_mps2=0.0, ad_mps2=0.0)
+    with pytest.raises(ValueError, match="on the ground"):
+        BatchState.from_states([states[0], VehicleState()])
+    with pytest.raises(ValueError, match="dt_s"):
+        step_batch(batch, 0.0, 0.0, 0.0, PARAMS, CALM, 0.0, -1.0)
+
+
+def test_step_batch_rejects_ground_contact_exactly_like_step():
+    def fleet(down_m, vd_mps):
+        return BatchState.from_states([airborne(down_m=-50.0), airborne(down_m=down_m, vd_mps=vd_mps)])
+
+    # Ends below the ground.
+    with pytest.raises(ValueError, match="vehicle 1 .*touch the ground"):
+        step_batch(fleet(-0.5, 1.5), 0.0, 0.0, np.array([0.0, 1.5]), PARAMS, CALM, 3.0, 1.0)
+    # Braking a descent close to the ground with a climb: ends in the air but touched down on the way.
+    cmd_down = np.array([0.0, -3.0])
+    assert step(airborne(down_m=-0.2, vd_mps=1.5), VelocityCommand(0.0, 0.0, -3.0), PARAMS, CALM, 2.0).down_m < -1.0
+    with pytest.raises(ValueError, match="vehicle 1"):
+        step_batch(fleet(-0.2, 1.5), 0.0, 0.0, cmd_down, PARAMS, CALM, 3.0, 2.0)
+    # Resting at ground level, or below it, is not airborne either.
+    with pytest.raises(ValueError, match="vehicle 1"):
+        step_batch(fleet(0.0, 0.0), 0.0, 0.0, 0.0, PARAMS, CALM, 3.0, 0.01)
+    with pytest.raises(ValueError, match="vehicle 1"):
+        step_batch(fleet(0.5, 0.0), 0.0, 0.0, cmd_down, PARAMS, CALM, 3.0, 0.01)
+    # Close to the ground but braking in time: the cheap bound flags it, the exact check lets it fly.
+    close = airborne(down_m=-1.0, vd_mps=1.5)
+    assert close.down_m + close.vd_mps * 1.0 >= 0.0
+    batch = step_batch(BatchState.from_states([close]), 2.0, 0.0, 0.0, PARAMS, GUSTY, 3.0, 1.0)
+    expected = step(close, VelocityCommand(2.0, 0.0, 0.0), PARAMS, GUSTY, 1.0)
+    assert not expected.on_ground and expected.down_m > -0.5
+    assert_batch_matches(batch, [expected], tol=1e-12)
