@@ -72,6 +72,7 @@ OBSERVATION_FIELDS: tuple[ObservationField, ...] = _layout(
     ("goal", 4, "one-hot meta-controller goal (ExploreArea, SearchSpecificLocation, TrackObject, ReturnToBase)"),
 )
 FIELDS_BY_NAME = {f.name: f for f in OBSERVATION_FIELDS}
+_GOAL_INDICES = np.arange(FIELDS_BY_NAME["goal"].size)
 OBS_DIM = sum(f.size for f in OBSERVATION_FIELDS)  # 276
 META_OBS_DIM = FIELDS_BY_NAME["goal"].offset  # 272: the meta-controller's view
 
@@ -95,20 +96,17 @@ def build_observations(agent_ne: np.ndarray, target_ne: np.ndarray, area: np.nda
     n = agent_ne.shape[0]
     if out is None:
         out = np.empty((n, OBS_DIM), dtype=np.float32)
-    origin = area[:, [0, 2]]
-    size = area[:, [1, 3]] - origin
+    origin = area[:, 0::2]  # (north_min, east_min)
+    size = area[:, 1::2] - origin
     out[:, 0:2] = (agent_ne - origin) / size
     out[:, 2:4] = (target_ne - origin) / size
     out[:, 4] = time_progress
-    out[:, 5] = sea / 2.0
-    out[:, 6] = weather / 3.0
-    out[:, 7] = time_of_day / 3.0
+    out[:, 5] = sea * 0.5
+    out[:, 6] = weather * (1.0 / 3.0)
+    out[:, 7] = time_of_day * (1.0 / 3.0)
     out[:, 8] = visibility
     out[:, 9] = wind
     out[:, 10:16] = detections
     out[:, 16:272] = coverage_blocks
-    goal_part = out[:, 272:276]
-    goal_part[:] = 0.0
-    has_goal = goal >= 0
-    goal_part[has_goal, goal[has_goal]] = 1.0
+    out[:, 272:276] = goal[:, None] == _GOAL_INDICES  # NO_GOAL matches nothing: all zero
     return out

@@ -295,6 +295,8 @@ def detection_probability_from_factors(drone_ne: np.ndarray, target_ne: np.ndarr
     dn = target_ne[:, :, 0] - drone_ne[:, 0:1]
     de = target_ne[:, :, 1] - drone_ne[:, 1:2]
     in_view = np.maximum(np.abs(dn), np.abs(de)) <= half_width  # the footprint is a square
+    if not in_view.any():  # the common case far from everything: nothing to compute
+        return np.zeros(in_view.shape)
 
     f_range = (dn * dn + de * de) * (-0.5 / (half_width * half_width)) + 1.0
     np.maximum(f_range, 0.0, out=f_range)  # the square's corners lie at r = h * sqrt(2): factor 0, never below

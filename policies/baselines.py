@@ -10,7 +10,9 @@ and their own detections (the last detection of the victim), never the hidden vi
   east-west tracks S apart, starting from the corner nearest to the drone.
 
 Both pattern searches fly at full speed with the sensor on and the camera at its widest, and once the victim
-has been detected fly straight to the last detection.
+has been detected fly straight to the last detection. Like a real crew they know the charted hazards and the
+search-area boundary: waypoints are kept 20 m inside the geofence, and a leg that would enter a danger zone
+(plus a 15 m margin) is flown around it along its edge.
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ TRACK_SPACING_FACTOR = 1.8
 PARALLEL_TRACK_SIGMAS = 2.5
 MAX_WAYPOINTS = 128
 ZOOM = 0.0
+FENCE_MARGIN_M = 20.0
+HAZARD_MARGIN_M = 15.0
 
 
 class ScriptedSearch:
@@ -59,16 +63,42 @@ class ScriptedSearch:
         self.next += arrived & (self.next < self.count - 1)
         goal = self.waypoints[index, self.next]
         goal = np.where(core.has_detection[:, None], core.last_detection, goal)
+        fence = core.scen.fence
+        goal[:, 0] = np.clip(goal[:, 0], fence[:, 0] + FENCE_MARGIN_M, fence[:, 1] - FENCE_MARGIN_M)
+        goal[:, 1] = np.clip(goal[:, 1], fence[:, 2] + FENCE_MARGIN_M, fence[:, 3] - FENCE_MARGIN_M)
         offset = goal - position
         distance = np.hypot(*offset.T)
         # full speed, slowing over the last step so that we stop on the point instead of overshooting it
-        speed_fraction = np.minimum(1.0, distance / (core.flight.max_speed_mps * core.flight.step_period_s))
-        direction = offset / np.maximum(distance, 1e-9)[:, None]
+        step_m = core.flight.max_speed_mps * core.flight.step_period_s
+        speed_fraction = np.minimum(1.0, distance / step_m)
+        direction = self._avoid_hazards(position, offset / np.maximum(distance, 1e-9)[:, None], step_m)
         actions = np.zeros((core.n, 4))
         actions[:, 0:2] = direction * speed_fraction[:, None]
         actions[:, 2] = 1.0
         actions[:, 3] = ZOOM
         return actions
+
+
+    def _avoid_hazards(self, position: np.ndarray, direction: np.ndarray, step_m: float) -> np.ndarray:
+        """Turn onto the tangent of the nearest danger zone that the next step would enter (inflated by the
+        margin), on the side closer to the wanted direction."""
+        obstacles, valid = self.core.scen.obstacles, self.core.scen.obstacle_valid
+        ahead = position + direction * step_m
+        dn = ahead[:, None, 0] - obstacles[:, :, 0]
+        de = ahead[:, None, 1] - obstacles[:, :, 1]
+        clearance = np.hypot(dn, de) - (obstacles[:, :, 2] + HAZARD_MARGIN_M)
+        clearance = np.where(valid, clearance, np.inf)
+        nearest = clearance.argmin(axis=1)
+        rows = np.arange(len(position))
+        blocked = clearance[rows, nearest] < 0.0
+        if not blocked.any():
+            return direction
+        centre = obstacles[rows, nearest, :2]
+        radial = position - centre
+        radial /= np.maximum(np.hypot(*radial.T), 1e-9)[:, None]
+        tangent = np.stack([-radial[:, 1], radial[:, 0]], axis=1)  # one way round
+        tangent *= np.where(np.einsum("ij,ij->i", tangent, direction) >= 0.0, 1.0, -1.0)[:, None]
+        return np.where(blocked[:, None], tangent, direction)
 
 
 class ExpandingSquare(ScriptedSearch):

@@ -51,8 +51,8 @@ class SarSearchEnv(gym.Env):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.core.step(np.asarray(action, dtype=np.float64)[None, :])
         self._path.append(tuple(self.core.position[0]))
-        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), \
-            {key: value[0] for key, value in info.items()}
+        single_info = {key: (value[0].copy() if value.ndim > 1 else value[0]) for key, value in info.items()}
+        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), single_info
 
     def set_goal(self, goal: int) -> np.ndarray:
         """HRL-SAC: the meta-controller's goal for the next K steps (an index into GOAL_NAMES).

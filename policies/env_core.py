@@ -246,6 +246,7 @@ class SarSearchBatch:
         """Advance every environment one decision; returns (obs, reward, terminated, truncated, info).
 
         Finished environments are NOT reset here; the wrappers decide when (gymnasium's auto-reset rules).
+        The info arrays are views of live state, valid until the next call.
         """
         flight, scen = self.flight, self.scen
         a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.n, 4), ACTION_LOW, ACTION_HIGH)
@@ -263,7 +264,10 @@ class SarSearchBatch:
         half_width = search.footprint_half_width_m(flight.altitude_m, a[:, 3])
         self.covered_cells += search.cover(self.coverage, scen.area, position, half_width, a[:, 2])
         probability = scen.detection_probability(position, self.targets, flight.altitude_m, a[:, 3], a[:, 2])
-        detected = keyed_uniforms(self.episode_seed, self.steps, self.max_targets) < probability
+        if probability.any():  # the draws are a pure function of (seed, step): skipping them changes nothing
+            detected = keyed_uniforms(self.episode_seed, self.steps, self.max_targets) < probability
+        else:
+            detected = np.zeros(probability.shape, dtype=bool)
         self.detections = search.detected_categories(detected, scen.target_category)
         primary = scen.primary_index
         victim_seen = detected[self._arange, primary]
@@ -281,12 +285,12 @@ class SarSearchBatch:
         self.episode_return += reward
         terminated = success | collision | out_of_bounds
         truncated = (self.steps >= flight.max_steps) & ~terminated
+        # Views of the live arrays: valid until the next step (the wrappers copy what they hand out).
         info = {"success": success, "collision": collision, "out_of_bounds": out_of_bounds,
                 "distance_to_victim_m": distance, "coverage_ratio": self.covered_cells / self.coverage[0].size,
-                "first_detection_step": self.first_detection_step.copy(),
-                "victim_detected": self.has_detection.copy(), "position": position.copy(),
-                "goal_point": self.goal_point.copy(), "path_length_m": self.path_length_m.copy(),
-                "episode_return": self.episode_return.copy(), "steps": self.steps.copy()}
+                "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,
+                "position": position, "goal_point": self.goal_point, "path_length_m": self.path_length_m,
+                "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 
     @property

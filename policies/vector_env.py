@@ -49,6 +49,7 @@ class SarSearchVectorEnv(VectorEnv):
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self.core.step(np.asarray(actions))
+        info = {key: value.copy() for key, value in info.items()}  # the core's are live views
         done = terminated | truncated
         if done.any():
             finished = np.flatnonzero(done)

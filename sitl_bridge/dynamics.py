@@ -553,13 +553,19 @@ def _step_one(state: BatchState, cmd_north, cmd_east, cmd_down, params: Multirot
     yaw = first(cmd_yaw_rad)
     command = VelocityCommand(first(cmd_north), first(cmd_east), first(cmd_down),
                               yaw if yaw is not None and math.isfinite(yaw) else None, first(cmd_yaw_rate_rad_s))
-    after = step(state.state(0, first(t0_s)), command, params, wind, dt_s)
-    if after.on_ground or state.down_m[0] > 0.0:
-        raise ValueError(f"step_batch: vehicle 0 (down_m={state.down_m[0]:.3f}, vd_mps={state.vd_mps[0]:.3f}) "
+    s = state
+    before = VehicleState(first(t0_s), s.north_m.item(), s.east_m.item(), s.down_m.item(), s.vn_mps.item(),
+                          s.ve_mps.item(), s.vd_mps.item(), s.yaw_rad.item(), 0.0, 0.0, 0.0, s.battery_wh.item(),
+                          on_ground=False)
+    after = step(before, command, params, wind, dt_s)
+    if after.on_ground or before.down_m > 0.0:
+        raise ValueError(f"step_batch: vehicle 0 (down_m={before.down_m:.3f}, vd_mps={before.vd_mps:.3f}) "
                          f"would touch the ground; step_batch models airborne flight only")
     if out is None:
         out = BatchState(*(np.empty(1) for _ in _BATCH_FIELDS))
-    out.set(0, after)
+    out.north_m[0], out.east_m[0], out.down_m[0] = after.north_m, after.east_m, after.down_m
+    out.vn_mps[0], out.ve_mps[0], out.vd_mps[0] = after.vn_mps, after.ve_mps, after.vd_mps
+    out.yaw_rad[0], out.battery_wh[0] = after.yaw_rad, after.battery_wh
     return out
 
 

@@ -1,0 +1,56 @@
+"""Difficulty calibration: the scripted baselines on the test split.
+
+Prints, per baseline, success rate (Wilson 95 % interval), collision / out-of-bounds rates, coverage and the
+time-to-find distribution (steps to first detection of the victim and to reaching it), and writes them to
+benchmarks/results/baselines.json. Targets: random <= 10 % success, expanding square >= 60 %.
+
+Usage: python benchmarks/baselines.py [--episodes 500] [--split test]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from policies.baseline_eval import run_baseline
+from policies.baselines import BASELINES
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=500)
+    parser.add_argument("--split", default="test", choices=["train", "val", "test"])
+    parser.add_argument("--out", default="benchmarks/results/baselines.json")
+    args = parser.parse_args()
+    results = []
+    for name in BASELINES:
+        start = time.perf_counter()
+        result = run_baseline(name, args.split, args.episodes)
+        result["wall_s"] = time.perf_counter() - start
+        results.append(result)
+        low, high = result["success_ci95"]
+        ttf = result["steps_to_first_detection"]
+        tts = result["steps_to_success"]
+        print(f"{name:17s} success {result['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  "
+              f"collision {result['collision_rate']:5.1%}  out {result['out_of_bounds_rate']:5.1%}  "
+              f"coverage {result['mean_coverage']:5.1%}  first detection p25/p50/p75 "
+              f"{_fmt(ttf['p25'])}/{_fmt(ttf['p50'])}/{_fmt(ttf['p75'])}  success at p25/p50/p75 "
+              f"{_fmt(tts['p25'])}/{_fmt(tts['p50'])}/{_fmt(tts['p75'])}  ({result['wall_s']:.1f} s)", flush=True)
+    report = {"command": "python " + " ".join(sys.argv), "results": results,
+              "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+    with open(args.out + ".tmp", "w") as handle:
+        json.dump(report, handle, indent=2)
+    os.replace(args.out + ".tmp", args.out)
+    print(f"written {args.out}")
+    return 0
+
+
+def _fmt(value) -> str:
+    return "-" if value is None else f"{value:.0f}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""Environment speed: SarSearch-v0 steps per second, single and vectorised, on one core.
+
+Figures (median of --repeats runs, random actions, auto-resets included):
+  * single_raw_steps_per_s: SarSearchEnv.step (no gymnasium wrappers)
+  * single_make_steps_per_s: gymnasium.make("SarSearch-v0") (with gymnasium's checker/order wrappers)
+  * vector_steps_per_s: SarSearchVectorEnv with --num-envs environments (scenario pool warmed first)
+  * reference_pendulum_steps_per_s: gymnasium's Pendulum-v1 in the same run, for comparing noisy runs
+Targets: >= 10,000 single and >= 200,000 vectorised steps/s.
+
+Usage: python benchmarks/env_speed.py [--steps 20000] [--num-envs 1024] [--repeats 5]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+import gymnasium
+import numpy as np
+
+import policies  # noqa: F401  (registers SarSearch-v0)
+from policies.env import SarSearchEnv
+from policies.env_core import SarSearchConfig
+from policies.vector_env import SarSearchVectorEnv
+
+
+def single_steps_per_s(env, steps: int) -> float:
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(env.action_space.low, env.action_space.high, size=(steps, 4)).astype(np.float32)
+    env.reset(seed=0)
+    start = time.perf_counter()
+    for action in actions:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def vector_steps_per_s(num_envs: int, steps: int) -> float:
+    env = SarSearchVectorEnv(num_envs, SarSearchConfig(pool_size=2_000))
+    rng = np.random.default_rng(0)
+    actions = rng.uniform([-1, -1, 0, 0], 1, size=(16, num_envs, 4)).astype(np.float32)
+    env.reset(seed=0)
+    for t in range(300):  # warm the scenario pool (each scenario is generated once)
+        env.step(actions[t % 16])
+    batches = max(1, steps // num_envs)
+    start = time.perf_counter()
+    for t in range(batches):
+        env.step(actions[t % 16])
+    return batches * num_envs / (time.perf_counter() - start)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--num-envs", type=int, default=1024)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--out", default="benchmarks/results/env_speed.json")
+    args = parser.parse_args()
+    runs: dict[str, list[float]] = {"single_raw_steps_per_s": [], "single_make_steps_per_s": [],
+                                    "vector_steps_per_s": [], "reference_pendulum_steps_per_s": []}
+    for repeat in range(args.repeats):
+        runs["reference_pendulum_steps_per_s"].append(single_steps_per_s(gymnasium.make("Pendulum-v1"), args.steps))
+        runs["single_raw_steps_per_s"].append(single_steps_per_s(SarSearchEnv(), args.steps))
+        runs["single_make_steps_per_s"].append(single_steps_per_s(gymnasium.make("SarSearch-v0"), args.steps))
+        runs["vector_steps_per_s"].append(vector_steps_per_s(args.num_envs, args.steps * 20))
+        print(f"run {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v[-1]:,.0f}" for k, v in runs.items()),
+              flush=True)
+    medians = {name: statistics.median(values) for name, values in runs.items()}
+    print(f"\nmedians over {args.repeats} runs (one core, {args.num_envs} vectorised environments):")
+    for name, value in medians.items():
+        print(f"  {name:32s} {value:12,.0f}   (min {min(runs[name]):,.0f}, max {max(runs[name]):,.0f})")
+    for name, target in (("single_raw_steps_per_s", 10_000), ("vector_steps_per_s", 200_000)):
+        verdict = "meets" if medians[name] >= target else "MISSES"
+        print(f"{name}: {verdict} the {target:,} target")
+    result = {"command": "python " + " ".join(sys.argv), "num_envs": args.num_envs, "repeats": args.repeats,
+              "medians": medians, "runs": runs, "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+    with open(args.out + ".tmp", "w") as handle:
+        json.dump(result, handle, indent=2)
+    os.replace(args.out + ".tmp", args.out)
+    print(f"written {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
