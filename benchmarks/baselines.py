@@ -9,13 +9,13 @@ Usage: python benchmarks/baselines.py [--episodes 500] [--split test]
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
 
 from policies.baseline_eval import run_baseline
 from policies.baselines import BASELINES
+
+from common import write_report
 
 
 def main() -> int:
@@ -38,13 +38,7 @@ def main() -> int:
               f"coverage {result['mean_coverage']:5.1%}  first detection p25/p50/p75 "
               f"{_fmt(ttf['p25'])}/{_fmt(ttf['p50'])}/{_fmt(ttf['p75'])}  success at p25/p50/p75 "
               f"{_fmt(tts['p25'])}/{_fmt(tts['p50'])}/{_fmt(tts['p75'])}  ({result['wall_s']:.1f} s)", flush=True)
-    report = {"command": "python " + " ".join(sys.argv), "results": results,
-              "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-    with open(args.out + ".tmp", "w") as handle:
-        json.dump(report, handle, indent=2)
-    os.replace(args.out + ".tmp", args.out)
-    print(f"written {args.out}")
+    write_report(args.out, {"results": results})
     return 0
 
 

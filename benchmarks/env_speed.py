@@ -12,9 +12,6 @@ Usage: python benchmarks/env_speed.py [--steps 20000] [--num-envs 1024] [--repea
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import statistics
 import sys
 import time
 
@@ -25,6 +22,8 @@ import policies  # noqa: F401  (registers SarSearch-v0)
 from policies.env import SarSearchEnv
 from policies.env_core import SarSearchConfig
 from policies.vector_env import SarSearchVectorEnv
+
+from common import summarise, write_report
 
 
 def single_steps_per_s(env, steps: int) -> float:
@@ -69,20 +68,11 @@ def main() -> int:
         runs["vector_steps_per_s"].append(vector_steps_per_s(args.num_envs, args.steps * 20))
         print(f"run {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v[-1]:,.0f}" for k, v in runs.items()),
               flush=True)
-    medians = {name: statistics.median(values) for name, values in runs.items()}
-    print(f"\nmedians over {args.repeats} runs (one core, {args.num_envs} vectorised environments):")
-    for name, value in medians.items():
-        print(f"  {name:32s} {value:12,.0f}   (min {min(runs[name]):,.0f}, max {max(runs[name]):,.0f})")
+    medians = summarise(runs, f"medians over {args.repeats} runs (one core, {args.num_envs} vectorised environments):")
     for name, target in (("single_raw_steps_per_s", 10_000), ("vector_steps_per_s", 200_000)):
         verdict = "meets" if medians[name] >= target else "MISSES"
         print(f"{name}: {verdict} the {target:,} target")
-    result = {"command": "python " + " ".join(sys.argv), "num_envs": args.num_envs, "repeats": args.repeats,
-              "medians": medians, "runs": runs, "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-    with open(args.out + ".tmp", "w") as handle:
-        json.dump(result, handle, indent=2)
-    os.replace(args.out + ".tmp", args.out)
-    print(f"written {args.out}")
+    write_report(args.out, {"num_envs": args.num_envs, "repeats": args.repeats, "medians": medians, "runs": runs})
     return 0
 
 

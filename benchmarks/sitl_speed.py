@@ -14,11 +14,8 @@ Usage: python benchmarks/sitl_speed.py [--seconds 60] [--repeats 5] [--out bench
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
 import platform
-import statistics
 import sys
 import time
 
@@ -28,6 +25,8 @@ from sitl_bridge import dynamics
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
+
+from common import summarise, write_report
 
 
 def flying_pilot() -> LockstepPilot:
@@ -100,21 +99,11 @@ def main() -> int:
         runs["dynamics_steps_per_s"].append(dynamics_steps_per_s(100_000))
         print(f"run {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v[-1]:,.0f}" for k, v in runs.items()),
               flush=True)
-    medians = {name: statistics.median(values) for name, values in runs.items()}
-    print("\nmedians over", args.repeats, "runs (one core):")
-    for name, value in medians.items():
-        print(f"  {name:40s} {value:12,.1f}   (min {min(runs[name]):,.1f}, max {max(runs[name]):,.1f})")
+    medians = summarise(runs, f"medians over {args.repeats} runs (one core):")
     verdict = "meets" if medians["lockstep_realtime_factor"] >= 200 else "MISSES"
     print(f"lockstep {medians['lockstep_realtime_factor']:.0f}x real time: {verdict} the 200x target")
-    result = {"command": " ".join([os.path.basename(sys.executable), *sys.argv]), "python": platform.python_version(),
-              "machine": platform.machine(), "seconds_per_run": args.seconds, "repeats": args.repeats,
-              "medians": medians, "runs": runs, "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-    tmp = args.out + ".tmp"
-    with open(tmp, "w") as handle:
-        json.dump(result, handle, indent=2)
-    os.replace(tmp, args.out)
-    print(f"written {args.out}")
+    write_report(args.out, {"python": platform.python_version(), "machine": platform.machine(),
+                            "seconds_per_run": args.seconds, "repeats": args.repeats, "medians": medians, "runs": runs})
     return 0
 
 
