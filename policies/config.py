@@ -1,0 +1,170 @@
+"""Every hyper-parameter of HRL-SAC and flat SAC in one dataclass, with the paper's and our presets.
+
+``TrainConfig.preset("paper")`` follows the paper's tables (3 x 512 low-level networks with LayerNorm, ReLU and
+Dropout 0.1; 2 x 256 meta networks; Adam 3e-4; gamma 0.99; tau 0.005; K = 30; batches 128 / 64; prioritised
+replay; 2,000 warm-up steps). ``"default"`` keeps the structure but is sized for a 2-core CPU: 2 x 256
+low-level networks without dropout (measured here: a paper-sized SAC update runs at 10-15 per second on one
+core, Dropout alone costs about a third of it; 2 x 256 networks run at 50-90 per second).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+from missions.mission import FlightSettings
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Shape of one family of networks (actor and critics share it)."""
+
+    hidden: tuple[int, ...] = (256, 256)
+    """Widths of the hidden layers (each Linear -> LayerNorm -> ReLU -> Dropout)."""
+    head: int | None = None
+    """Width of an extra last hidden layer before the output (the paper's 256 after 3 x 512); None = none."""
+    layer_norm: bool = True
+    """LayerNorm after each hidden Linear (the paper: yes)."""
+    dropout: float = 0.0
+    """Dropout probability after each hidden activation (the paper: 0.1). Off in deterministic evaluation."""
+
+    def __post_init__(self) -> None:
+        if not self.hidden or any(int(w) != w or w < 1 for w in self.hidden):
+            raise ValueError(f"NetworkConfig.hidden must be positive integers, got {self.hidden}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"NetworkConfig.dropout must be in [0, 1), got {self.dropout}")
+
+    @property
+    def layers(self) -> tuple[int, ...]:
+        return tuple(self.hidden) + ((self.head,) if self.head else ())
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run; ``hrlsac train`` writes it to the run folder."""
+
+    algo: str = "hrl-sac"
+    """"hrl-sac" (meta-controller + goal-conditioned SAC) or "sac" (flat SAC on the same observation)."""
+    preset: str = "default"
+    """Name of the preset this config started from ("default" or "paper"); informational."""
+    seed: int = 0
+    """Seeds the networks, the replay sampling, exploration and the environments' episode seeds."""
+    total_steps: int = 100_000
+    """Environment steps to train for (summed over the parallel environments)."""
+    num_envs: int = 8
+    """Environments stepped together (vectorised); each step adds num_envs transitions."""
+    split: str = "train"
+    """Scenario split trained on (evaluation uses val / test)."""
+    flight: FlightSettings = field(default_factory=FlightSettings)
+    """Altitude, speed, decision period, K (subgoal_interval), step limit and reach radius."""
+
+    # --- low-level / flat SAC
+    actor: NetworkConfig = field(default_factory=NetworkConfig)
+    """Low-level (or flat) actor: 276 -> hidden -> (mean, log_std) of 4."""
+    critic: NetworkConfig = field(default_factory=NetworkConfig)
+    """Low-level twin critics: 276 + 4 -> hidden -> 1."""
+    learning_rate: float = 3e-4
+    """Adam learning rate of every network and of the entropy temperatures (the paper's table)."""
+    gamma: float = 0.99
+    """Discount of the low-level (and flat) SAC."""
+    tau: float = 0.005
+    """Polyak rate of the target critics."""
+    batch_size: int = 128
+    """Low-level minibatch."""
+    buffer_size: int = 200_000
+    """Low-level replay capacity (transitions)."""
+    warmup_steps: int = 2_000
+    """Environment steps with uniform random actions before learning starts."""
+    updates_per_step: float = 0.125
+    """Gradient updates of the low-level SAC per environment step (1/num_envs = one per vector step)."""
+    log_std_bounds: tuple[float, float] = (-20.0, 2.0)
+    """Clip of the actor's log standard deviation (the paper's [-20, 2])."""
+    target_entropy: float | None = None
+    """Low-level entropy target; None = -|A| = -4."""
+    initial_alpha: float = 0.2
+    """Initial entropy temperature of both levels."""
+
+    # --- prioritised replay (both levels)
+    per_alpha: float = 0.6
+    """How strongly priorities skew sampling (0 = uniform)."""
+    per_beta_start: float = 0.4
+    """Importance-weight exponent at the start, annealed linearly to 1 over the run."""
+    per_eps: float = 1e-6
+    """Added to |TD error| so that no transition gets priority 0."""
+
+    # --- meta-controller (HRL-SAC)
+    meta_actor: NetworkConfig = field(default_factory=NetworkConfig)
+    """Meta actor: 272 -> hidden -> 4 logits."""
+    meta_critic: NetworkConfig = field(default_factory=NetworkConfig)
+    """Meta twin critics: 272 + 4 (goal one-hot) -> hidden -> 1."""
+    meta_batch_size: int = 64
+    """Meta minibatch (the paper's 64)."""
+    meta_buffer_size: int = 50_000
+    """Meta replay capacity (K-step transitions)."""
+    meta_gamma: float = 0.99
+    """Discount per low-level step inside the K-step return; a meta transition is discounted by gamma^k."""
+    meta_target_entropy_scale: float = 0.89
+    """Meta entropy target = scale * log(4): high enough that the meta-policy never collapses."""
+    meta_min_alpha: float = 1e-3
+    """Floor on the meta temperature, a second guard against a deterministic meta-policy."""
+    intrinsic_scale_m: float = 100.0
+    """The low-level reward is -||position - g|| / intrinsic_scale_m per step (metres -> order 1)."""
+    intrinsic_goal_bonus: float = 1.0
+    """Added to the intrinsic reward on the step the low level comes within reach of its sub-goal."""
+    extrinsic_weight: float = 1.0
+    """Share of the extrinsic reward added to the low-level reward (0 = purely intrinsic, as the paper)."""
+
+    # --- bookkeeping
+    checkpoint_every: int = 20_000
+    """Environment steps between checkpoints (written atomically; --resume continues from the last)."""
+    eval_every: int = 10_000
+    """Environment steps between quick evaluations on the val split (0 = never)."""
+    eval_episodes: int = 32
+    """Episodes per quick evaluation."""
+    log_every: int = 1_000
+    """Environment steps between CSV / TensorBoard log rows."""
+    torch_threads: int = 1
+    """torch.set_num_threads: 1 is fastest for these small networks on a shared 2-core machine."""
+
+    def __post_init__(self) -> None:
+        if self.algo not in ("hrl-sac", "sac"):
+            raise ValueError(f"TrainConfig.algo must be 'hrl-sac' or 'sac', got {self.algo!r}")
+        for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
+                                ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
+                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                raise ValueError(f"TrainConfig.{name} must be an integer in [{low}, {high}], got {value!r}")
+        for name, low, high in (("learning_rate", 1e-7, 1.0), ("gamma", 0.0, 1.0), ("meta_gamma", 0.0, 1.0),
+                                ("tau", 0.0, 1.0), ("updates_per_step", 0.0, 64.0), ("per_alpha", 0.0, 1.0),
+                                ("per_beta_start", 0.0, 1.0), ("meta_target_entropy_scale", 0.0, 1.0),
+                                ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6)):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "TrainConfig":
+        """The "default" (CPU-sized) or "paper" configuration, with field overrides."""
+        if name == "default":
+            base = cls(preset="default")
+        elif name == "paper":
+            big = NetworkConfig(hidden=(512, 512, 512), head=256, layer_norm=True, dropout=0.1)
+            meta = NetworkConfig(hidden=(256, 256), layer_norm=True, dropout=0.1)
+            base = cls(preset="paper", actor=big, critic=NetworkConfig(hidden=(512, 512), head=256, dropout=0.1),
+                       meta_actor=meta, meta_critic=meta, flight=FlightSettings(max_steps=10_000))
+        else:
+            raise ValueError(f"unknown preset {name!r} (choose from default, paper)")
+        return dataclasses.replace(base, **overrides)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        data = dict(data)
+        data["flight"] = FlightSettings(**data["flight"])
+        for name in ("actor", "critic", "meta_actor", "meta_critic"):
+            data[name] = NetworkConfig(**{**data[name], "hidden": tuple(data[name]["hidden"])})
+        data["log_std_bounds"] = tuple(data["log_std_bounds"])
+        return cls(**data)
