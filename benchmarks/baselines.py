@@ -31,11 +31,11 @@ def main() -> int:
         result["wall_s"] = time.perf_counter() - start
         results.append(result)
         low, high = result["success_ci95"]
-        ttf = result["steps_to_first_detection"]
+        ttf = result["time_to_first_detection"]
         tts = result["steps_to_success"]
         print(f"{name:17s} success {result['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  "
               f"collision {result['collision_rate']:5.1%}  out {result['out_of_bounds_rate']:5.1%}  "
-              f"coverage {result['mean_coverage']:5.1%}  first detection p25/p50/p75 "
+              f"coverage {result['coverage_mean']:5.1%}  first detection p25/p50/p75 "
               f"{_fmt(ttf['p25'])}/{_fmt(ttf['p50'])}/{_fmt(ttf['p75'])}  success at p25/p50/p75 "
               f"{_fmt(tts['p25'])}/{_fmt(tts['p50'])}/{_fmt(tts['p75'])}  ({result['wall_s']:.1f} s)", flush=True)
     write_report(args.out, {"results": results})

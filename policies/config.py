@@ -71,8 +71,8 @@ class TrainConfig:
     """Polyak rate of the target critics."""
     batch_size: int = 128
     """Low-level minibatch."""
-    buffer_size: int = 200_000
-    """Low-level replay capacity (transitions)."""
+    buffer_size: int = 100_000
+    """Low-level replay capacity (transitions; about 2.2 kB each, kept in checkpoints)."""
     warmup_steps: int = 2_000
     """Environment steps with uniform random actions before learning starts."""
     updates_per_step: float = 0.125

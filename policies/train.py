@@ -1,0 +1,325 @@
+"""Training HRL-SAC and flat SAC on ``SarSearch-v0``: one loop, readable top to bottom (CleanRL style).
+
+Per vector step (``num_envs`` environments at once):
+
+1. HRL-SAC only: every environment whose sub-goal has run K steps (or that starts an episode) gets a new goal
+   from the meta-controller (uniformly random during warm-up); the environment grounds it to a point g.
+2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
+3. Transitions are stored raw in prioritised replay: the low level's with reward
+   ``-||position - g|| / intrinsic_scale_m`` (+ a bonus on reaching g, + ``extrinsic_weight`` x the environment
+   reward) for HRL-SAC, the environment reward for flat SAC; the meta-controller's, once its goal has run K
+   steps or the episode ended, with the K-step discounted extrinsic return and discount ``meta_gamma ** k``.
+4. After warm-up: ``updates_per_step`` low-level updates per environment step and one meta update per meta
+   transition, with importance weights and new priorities from the TD errors.
+
+Checkpoints (every ``checkpoint_every`` steps and at the end) hold everything needed to continue exactly:
+networks, optimisers, temperatures, replay buffers, the observation normaliser, the environments' state and
+every random generator; ``--resume`` continues a killed run and gives the same next update as an
+uninterrupted one.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import pickle
+import sys
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from autonomy.observation import META_OBS_DIM, OBS_DIM
+from missions.goals import GOAL_NAMES
+from policies.config import TrainConfig
+from policies.discrete_sac import DiscreteSAC
+from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
+from policies.normalizer import RunningMeanStd
+from policies.replay import PrioritizedReplayBuffer, linear_beta
+from policies.sac import SAC
+from policies.vector_env import SarSearchVectorEnv
+
+CHECKPOINT = "checkpoint.pt"
+LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
+              "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
+              "meta_entropy", "steps_per_s")
+WINDOW = 100  # episodes in the rolling statistics
+
+
+def atomic_torch_save(obj, path: Path) -> None:
+    """Write ``obj`` with torch.save to a temporary file, then rename: a kill never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+class Trainer:
+    """One training run in ``run_dir``; create with a config (new run) or with ``resume=True``."""
+
+    def __init__(self, config: TrainConfig, run_dir: Path | str, resume: bool = False):
+        self.run_dir = Path(run_dir)
+        self.config = cfg = config
+        self.hrl = cfg.algo == "hrl-sac"
+        torch.set_num_threads(cfg.torch_threads)
+        torch.manual_seed(cfg.seed)
+        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(split=cfg.split, flight=cfg.flight,
+                                                                    goal_conditioned=self.hrl))
+        self.rng = np.random.default_rng(cfg.seed)
+        self.normalizer = RunningMeanStd((OBS_DIM,))
+        self.low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed)
+        self.low_buffer = PrioritizedReplayBuffer(cfg.buffer_size, {
+            "obs": ((OBS_DIM,), np.float32), "action": ((4,), np.float32), "reward": ((), np.float32),
+            "next_obs": ((OBS_DIM,), np.float32), "done": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed)
+        self.meta = self.meta_buffer = None
+        if self.hrl:
+            self.meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), cfg, seed=cfg.seed + 1)
+            self.meta_buffer = PrioritizedReplayBuffer(cfg.meta_buffer_size, {
+                "obs": ((META_OBS_DIM,), np.float32), "action": ((), np.int64), "reward": ((), np.float32),
+                "next_obs": ((META_OBS_DIM,), np.float32), "done": ((), np.float32),
+                "discount": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed + 1)
+        n = cfg.num_envs
+        self.step = 0  # environment steps so far (summed over environments)
+        self.update_budget = 0.0
+        self.needs_goal = np.ones(n, dtype=bool)
+        self.segment_obs = np.zeros((n, META_OBS_DIM), dtype=np.float32)
+        self.segment_goal = np.zeros(n, dtype=np.int64)
+        self.segment_return = np.zeros(n)
+        self.segment_steps = np.zeros(n, dtype=np.int64)
+        self.segment_reached = np.zeros(n, dtype=bool)
+        self.episodes = 0
+        self.recent: deque = deque(maxlen=WINDOW)  # (success, return, length, coverage) of finished episodes
+        self.recent_subgoals: deque = deque(maxlen=10 * WINDOW)  # 1 if a sub-goal point was reached in time
+        self.metrics: dict[str, float] = {}
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        if resume:
+            self._load(self.run_dir / CHECKPOINT)
+        else:
+            seeds = self.rng.integers(0, 2**62, size=n)
+            self.obs, _ = self.env.reset(seed=[int(s) for s in seeds])
+            (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+        self._writer = None
+
+    # ------------------------------------------------------------------ acting
+    def _norm(self, obs: np.ndarray) -> np.ndarray:
+        return self.normalizer.normalize(obs)
+
+    def _norm_meta(self, meta_obs: np.ndarray) -> np.ndarray:
+        return np.clip((meta_obs - self.normalizer.mean[:META_OBS_DIM])
+                       / np.sqrt(self.normalizer.var[:META_OBS_DIM] + 1e-8),
+                       -self.normalizer.clip, self.normalizer.clip).astype(np.float32)
+
+    def _choose_goals(self) -> None:
+        need = self.needs_goal
+        if not need.any():
+            return
+        meta_obs = self.obs[need, :META_OBS_DIM]
+        if self.step < self.config.warmup_steps:
+            goals = self.rng.integers(0, len(GOAL_NAMES), size=int(need.sum()))
+        else:
+            goals = self.meta.act(self._norm_meta(meta_obs))
+        all_goals = np.zeros(self.config.num_envs, dtype=np.int64)
+        all_goals[need] = goals
+        self.obs = self.env.set_goals(all_goals, need)
+        self.segment_obs[need] = self.obs[need, :META_OBS_DIM]
+        self.segment_goal[need] = goals
+        self.segment_return[need] = 0.0
+        self.segment_steps[need] = 0
+        self.segment_reached[need] = False
+        self.needs_goal[:] = False
+
+    def collect(self) -> int:
+        """One vector step of experience; returns the number of meta transitions it completed."""
+        cfg = self.config
+        if self.hrl:
+            self._choose_goals()
+        if self.step < cfg.warmup_steps:
+            actions = self.rng.uniform(ACTION_LOW, ACTION_HIGH, size=(cfg.num_envs, 4)).astype(np.float32)
+        else:
+            actions = self.low.act(self._norm(self.obs)).astype(np.float32)
+        next_obs, reward, terminated, truncated, info = self.env.step(actions)
+        done = terminated | truncated
+        real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
+        for i in np.flatnonzero(done):
+            real_next[i] = info["final_obs"][i]
+        if self.hrl:
+            distance = np.hypot(*(info["position"] - info["goal_point"]).T)
+            reached = distance <= cfg.flight.reach_radius_m
+            low_reward = (-distance / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * reached
+                          + cfg.extrinsic_weight * reward)
+            self.segment_reached |= reached
+        else:
+            low_reward = reward
+        self.low_buffer.add(obs=self.obs, action=actions, reward=low_reward.astype(np.float32), next_obs=real_next,
+                            done=terminated.astype(np.float32))
+        self.normalizer.update(self.obs)
+        completed = 0
+        if self.hrl:
+            self.segment_return += cfg.meta_gamma ** self.segment_steps * reward
+            self.segment_steps += 1
+            finish = (self.segment_steps >= cfg.flight.subgoal_interval) | done
+            if finish.any():
+                self.meta_buffer.add(obs=self.segment_obs[finish], action=self.segment_goal[finish],
+                                     reward=self.segment_return[finish].astype(np.float32),
+                                     next_obs=real_next[finish, :META_OBS_DIM],
+                                     done=terminated[finish].astype(np.float32),
+                                     discount=(cfg.meta_gamma ** self.segment_steps[finish]).astype(np.float32))
+                self.recent_subgoals.extend(self.segment_reached[finish].astype(float).tolist())
+                self.needs_goal |= finish
+                completed = int(finish.sum())
+        for i in np.flatnonzero(done):
+            self.episodes += 1
+            self.recent.append((float(info["success"][i]), float(info["episode_return"][i]),
+                                float(info["steps"][i]), float(info["coverage_ratio"][i])))
+        self.obs = next_obs
+        self.step += cfg.num_envs
+        return completed
+
+    # ------------------------------------------------------------------ learning
+    def learn(self, meta_transitions: int) -> None:
+        cfg = self.config
+        if self.step < cfg.warmup_steps or len(self.low_buffer) < cfg.batch_size:
+            return
+        beta = linear_beta(self.step, cfg.total_steps, cfg.per_beta_start)
+        self.update_budget += cfg.updates_per_step * cfg.num_envs
+        while self.update_budget >= 1.0:
+            self.update_budget -= 1.0
+            batch, indices, weights = self.low_buffer.sample(cfg.batch_size, beta)
+            batch["obs"], batch["next_obs"] = self._norm(batch["obs"]), self._norm(batch["next_obs"])
+            td, metrics = self.low.update(batch, weights)
+            self.low_buffer.update_priorities(indices, td)
+            self.metrics.update(metrics)
+        if self.hrl and len(self.meta_buffer) >= cfg.meta_batch_size:
+            for _ in range(meta_transitions):
+                batch, indices, weights = self.meta_buffer.sample(cfg.meta_batch_size, beta)
+                batch["obs"], batch["next_obs"] = self._norm_meta(batch["obs"]), self._norm_meta(batch["next_obs"])
+                td, metrics = self.meta.update(batch, weights)
+                self.meta_buffer.update_priorities(indices, td)
+                self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, progress: bool = True, stop_at: int | None = None) -> Path:
+        """Train to ``total_steps`` (or stop early at ``stop_at`` steps, for tests); returns the checkpoint path."""
+        cfg = self.config
+        end = min(cfg.total_steps, stop_at) if stop_at is not None else cfg.total_steps
+        csv_path = self.run_dir / "progress.csv"
+        new_csv = not csv_path.exists()
+        started, started_step = time.perf_counter(), self.step
+        last_log = self.step // cfg.log_every
+        last_checkpoint = self.step // cfg.checkpoint_every
+        with open(csv_path, "a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
+            if new_csv:
+                writer.writeheader()
+            while self.step < end:
+                self.learn(self.collect())
+                if self.step // cfg.log_every > last_log:
+                    last_log = self.step // cfg.log_every
+                    row = self._log_row(started, started_step)
+                    writer.writerow(row)
+                    handle.flush()
+                    self._tensorboard(row)
+                    if progress:
+                        self._print_progress(row, end)
+                if self.step // cfg.checkpoint_every > last_checkpoint:
+                    last_checkpoint = self.step // cfg.checkpoint_every
+                    self.save()
+        path = self.save()
+        if progress:
+            print(file=sys.stderr)
+        if self._writer is not None:
+            self._writer.close()
+        return path
+
+    def _log_row(self, started: float, started_step: int) -> dict:
+        recent = np.array(self.recent) if self.recent else np.zeros((0, 4))
+        mean = (lambda column: float(recent[:, column].mean()) if len(recent) else math.nan)
+        m = self.metrics
+        elapsed = max(time.perf_counter() - started, 1e-9)
+        return {"step": self.step, "episodes": self.episodes, "success_rate": mean(0), "mean_return": mean(1),
+                "mean_length": mean(2), "mean_coverage": mean(3),
+                "subgoal_reachability": float(np.mean(self.recent_subgoals)) if self.recent_subgoals else math.nan,
+                "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
+                "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
+                "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
+                "steps_per_s": (self.step - started_step) / elapsed}
+
+    def _tensorboard(self, row: dict) -> None:
+        try:
+            if self._writer is None:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self._writer = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=self.step)
+        except ImportError:  # tensorboard is a dependency, but training must not die for the lack of a log
+            self._writer = False
+        if self._writer:
+            for key, value in row.items():
+                if key != "step" and not math.isnan(value):
+                    self._writer.add_scalar(key, value, row["step"])
+
+    def _print_progress(self, row: dict, end: int) -> None:
+        done = self.step / end
+        bar = "#" * int(30 * done) + "." * (30 - int(30 * done))
+        line = (f"[{bar}] {self.step:,}/{end:,} steps  {row['steps_per_s']:,.0f}/s  episodes {row['episodes']}  "
+                f"success {row['success_rate']:.0%}  return {row['mean_return']:.1f}")
+        print(("\r" + line) if sys.stderr.isatty() else line, end="" if sys.stderr.isatty() else "\n",
+              file=sys.stderr, flush=True)
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        return {
+            "format": 1, "config": self.config.to_dict(), "step": self.step, "update_budget": self.update_budget,
+            "low": self.low.state_dict(), "low_buffer": self.low_buffer.state_dict(),
+            "meta": self.meta.state_dict() if self.meta else None,
+            "meta_buffer": self.meta_buffer.state_dict() if self.meta_buffer else None,
+            "normalizer": self.normalizer.state_dict(), "env": pickle.dumps(self.env.core),
+            "obs": self.obs.copy(), "needs_goal": self.needs_goal.copy(),
+            "segment": [self.segment_obs.copy(), self.segment_goal.copy(), self.segment_return.copy(),
+                        self.segment_steps.copy(), self.segment_reached.copy()],
+            "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(), "episodes": self.episodes,
+            "recent": list(self.recent), "recent_subgoals": list(self.recent_subgoals), "metrics": dict(self.metrics),
+        }
+
+    def save(self) -> Path:
+        path = self.run_dir / CHECKPOINT
+        atomic_torch_save(self.state_dict(), path)
+        return path
+
+    def _load(self, path: Path) -> None:
+        if not path.exists():
+            raise FileNotFoundError(f"cannot resume: no checkpoint at {path}")
+        state = torch.load(path, map_location="cpu", weights_only=False)
+        self.step, self.update_budget = state["step"], state["update_budget"]
+        self.low.load_state_dict(state["low"])
+        self.low_buffer.load_state_dict(state["low_buffer"])
+        if self.meta is not None:
+            self.meta.load_state_dict(state["meta"])
+            self.meta_buffer.load_state_dict(state["meta_buffer"])
+        self.normalizer.load_state_dict(state["normalizer"])
+        self.env.core = pickle.loads(state["env"])
+        self.obs, self.needs_goal = state["obs"], state["needs_goal"]
+        (self.segment_obs, self.segment_goal, self.segment_return, self.segment_steps,
+         self.segment_reached) = state["segment"]
+        self.rng.bit_generator.state = state["rng"]
+        torch.set_rng_state(state["torch_rng"])
+        self.episodes = state["episodes"]
+        self.recent.extend(state["recent"])
+        self.recent_subgoals.extend(state["recent_subgoals"])
+        self.metrics = dict(state["metrics"])
+        self._truncate_csv(self.step)
+
+    def _truncate_csv(self, step: int) -> None:
+        """Drop log rows written after the checkpoint a resumed run continues from (they will be rewritten)."""
+        path = self.run_dir / "progress.csv"
+        if not path.exists():
+            return
+        with open(path, newline="") as handle:
+            rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= step]
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
+        os.replace(tmp, path)

@@ -1,0 +1,85 @@
+"""``hrlsac train``: train HRL-SAC or flat SAC on SarSearch-v0 into a run folder (resumable)."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+from policies.train import CHECKPOINT
+
+
+def build_parser(prog: str) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--algo", choices=["hrl-sac", "sac"], default="hrl-sac")
+    parser.add_argument("--preset", choices=["default", "paper"], default="default")
+    parser.add_argument("--steps", type=int, default=100_000, help="environment steps to train for")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--num-envs", type=int, default=None, help="parallel environments (preset: 8)")
+    parser.add_argument("--out", required=True, help="run folder (config.json, progress.csv, checkpoint.pt, tensorboard/)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a TrainConfig field (JSON value), e.g. --set warmup_steps=500")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    return parser
+
+
+def _overrides(items: list[str]) -> dict:
+    from policies.config import TrainConfig
+
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or name not in names:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(sorted(names))}")
+        try:
+            out[name] = json.loads(text)
+        except json.JSONDecodeError:
+            out[name] = text
+    return out
+
+
+def main(argv: list[str], prog: str = "hrlsac train") -> int:
+    args = build_parser(prog).parse_args(argv)
+    from policies.config import TrainConfig
+    from policies.train import Trainer
+
+    run_dir = Path(args.out)
+    try:
+        if args.resume:
+            config_path = run_dir / "config.json"
+            if not (run_dir / CHECKPOINT).exists() or not config_path.exists():
+                raise ValueError(f"--resume: no checkpoint in {run_dir} (expected {CHECKPOINT} and config.json)")
+            config = TrainConfig.from_dict(json.loads(config_path.read_text()))
+            if args.steps != config.total_steps and "--steps" in argv:
+                config = dataclasses.replace(config, total_steps=args.steps)
+            trainer = Trainer(config, run_dir, resume=True)
+        else:
+            if (run_dir / CHECKPOINT).exists():
+                raise ValueError(f"{run_dir} already holds a run; continue it with --resume or choose another --out")
+            overrides = _overrides(args.set)
+            if args.num_envs is not None:
+                overrides["num_envs"] = args.num_envs
+            config = TrainConfig.preset(args.preset, algo=args.algo, total_steps=args.steps, seed=args.seed,
+                                        **overrides)
+            trainer = Trainer(config, run_dir)
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        print(f"training {config.algo} ({config.preset} preset) for {config.total_steps:,} steps with "
+              f"{config.num_envs} environments, seed {config.seed}; run folder {run_dir}"
+              + (f" (resumed at step {trainer.step:,})" if args.resume else ""), flush=True)
+    try:
+        path = trainer.run(progress=not args.quiet)
+    except KeyboardInterrupt:
+        trainer.save()
+        print(f"\n{prog}: interrupted at step {trainer.step:,}; checkpoint saved, continue with "
+              f"'hrlsac train --out {run_dir} --resume'", file=sys.stderr)
+        return 130
+    if not args.quiet:
+        print(f"done: {trainer.step:,} steps, {trainer.episodes} episodes; checkpoint {path}")
+    return 0
