@@ -143,7 +143,8 @@ class PrioritizedReplayBuffer:
         self.alpha = float(alpha)
         self.eps = float(eps)
         self.rng = np.random.default_rng(seed)
-        self.data = {name: np.zeros((self.capacity, *shape), dtype=dtype) for name, (shape, dtype) in self.fields.items()}
+        self.data = {name: np.zeros((self.capacity, *shape), dtype=dtype)
+                     for name, (shape, dtype) in self.fields.items()}
         self.tree = SumTree(self.capacity)
         self.position = 0  # next row to write
         self.size = 0
