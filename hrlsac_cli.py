@@ -14,6 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sitl": ("sitl_bridge.cli", "run the simulated PX4-like multirotor and wait for MAVLink clients"),
     "demo": ("sitl_bridge.scripted_flight", "fly a short scripted mission in the simulated vehicle and report"),
     "train": ("policies.train_cli", "train HRL-SAC or flat SAC on the search environment (resumable)"),
+    "evaluate": ("policies.evaluate_cli", "the paper's metrics of a trained run on a scenario split"),
     "dataset": ("missions.dataset_cli", "make the synthetic SAR dataset or inspect a YOLO dataset"),
 }
 

@@ -89,3 +89,16 @@ def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_condit
     """One slot per scenario 0..episodes-1 of ``split``."""
     config = SarSearchConfig(split=split, flight=flight, pool_size=max(episodes, 1), goal_conditioned=goal_conditioned)
     return make_batch(config, list(range(episodes)))
+
+
+def evaluate_checkpoint(path, split: str = "test", episodes: int = 100) -> dict:
+    """The paper's metrics of a trained run's deterministic policy on ``split``."""
+    from policies.checkpoint_policy import CheckpointPolicy
+
+    policy = CheckpointPolicy.load(path)
+    core = episode_batch(split, episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
+    record = run_episodes(core, lambda batch: policy.act(batch.obs),
+                          policy.choose_goals if policy.hierarchical else None)
+    return {"algo": policy.config.algo, "preset": policy.config.preset, "seed": policy.config.seed,
+            "checkpoint": str(policy.path), "trained_steps": policy.step, "split": split,
+            "max_steps": policy.config.flight.max_steps, **summarise(record)}

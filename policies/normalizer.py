@@ -49,9 +49,12 @@ class RunningMeanStd:
         self.count = total
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
-        """``(x - mean) / sqrt(var + 1e-8)`` clipped to ``[-clip, clip]``, as float32 (any leading dims)."""
+        """``(x - mean) / sqrt(var + 1e-8)`` clipped to ``[-clip, clip]``, as float32 (any leading dims).
+
+        ``x`` may hold only the first D features (the meta-controller sees a prefix of the observation)."""
         x = np.asarray(x, dtype=np.float64)
-        standardised = (x - self.mean) / np.sqrt(self.var + 1e-8)
+        d = x.shape[-1]
+        standardised = (x - self.mean[..., :d]) / np.sqrt(self.var[..., :d] + 1e-8)
         return np.clip(standardised, -self.clip, self.clip).astype(np.float32)
 
     def state_dict(self) -> dict:

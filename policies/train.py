@@ -106,11 +106,6 @@ class Trainer:
     def _norm(self, obs: np.ndarray) -> np.ndarray:
         return self.normalizer.normalize(obs)
 
-    def _norm_meta(self, meta_obs: np.ndarray) -> np.ndarray:
-        return np.clip((meta_obs - self.normalizer.mean[:META_OBS_DIM])
-                       / np.sqrt(self.normalizer.var[:META_OBS_DIM] + 1e-8),
-                       -self.normalizer.clip, self.normalizer.clip).astype(np.float32)
-
     def _choose_goals(self) -> None:
         need = self.needs_goal
         if not need.any():
@@ -119,7 +114,7 @@ class Trainer:
         if self.step < self.config.warmup_steps:
             goals = self.rng.integers(0, len(GOAL_NAMES), size=int(need.sum()))
         else:
-            goals = self.meta.act(self._norm_meta(meta_obs))
+            goals = self.meta.act(self._norm(meta_obs))
         all_goals = np.zeros(self.config.num_envs, dtype=np.int64)
         all_goals[need] = goals
         self.obs = self.env.set_goals(all_goals, need)
@@ -194,7 +189,7 @@ class Trainer:
         if self.hrl and len(self.meta_buffer) >= cfg.meta_batch_size:
             for _ in range(meta_transitions):
                 batch, indices, weights = self.meta_buffer.sample(cfg.meta_batch_size, beta)
-                batch["obs"], batch["next_obs"] = self._norm_meta(batch["obs"]), self._norm_meta(batch["next_obs"])
+                batch["obs"], batch["next_obs"] = self._norm(batch["obs"]), self._norm(batch["next_obs"])
                 td, metrics = self.meta.update(batch, weights)
                 self.meta_buffer.update_priorities(indices, td)
                 self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
