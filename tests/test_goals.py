@@ -1,0 +1,62 @@
+"""Goal grounding: each of the meta-controller's goals becomes the documented point of the search state."""
+from __future__ import annotations
+
+import numpy as np
+
+from missions.goals import EXPLORE, RETURN_TO_BASE, SEARCH_LOCATION, TRACK_OBJECT, ground_goals
+
+AREA = np.array([[-50.0, 950.0, -500.0, 500.0]])  # 32 x 32 cells of 31.25 m; 8 x 8 blocks of 125 m
+
+
+def ground(goal, agent=(0.0, 0.0), coverage=None, datum=(600.0, 100.0), sigma=80.0, detection=None, home=(0.0, 0.0)):
+    coverage = np.zeros((1, 32, 32), np.float32) if coverage is None else coverage[None]
+    last = np.array([detection if detection is not None else datum])
+    return ground_goals(np.array([goal]), np.array([agent]), AREA, coverage, np.array([datum]), np.array([sigma]),
+                        last, np.array([detection is not None]), np.array([home]))[0]
+
+
+def cell_centre(row: int, col: int) -> tuple[float, float]:
+    return -50.0 + (row + 0.5) * 31.25, -500.0 + (col + 0.5) * 31.25
+
+
+def test_return_to_base_is_home():
+    np.testing.assert_allclose(ground(RETURN_TO_BASE, agent=(700.0, 300.0), home=(0.0, 0.0)), (0.0, 0.0))
+
+
+def test_track_object_is_the_last_detection_or_the_datum():
+    np.testing.assert_allclose(ground(TRACK_OBJECT), (600.0, 100.0))
+    np.testing.assert_allclose(ground(TRACK_OBJECT, detection=(640.0, 80.0)), (640.0, 80.0))
+
+
+def test_search_location_is_the_most_probable_uncovered_cell_near_the_datum():
+    datum = cell_centre(20, 19)
+    np.testing.assert_allclose(ground(SEARCH_LOCATION, datum=datum), datum)
+    coverage = np.zeros((32, 32), np.float32)
+    coverage[19:22, 18:21] = 1.0  # the datum's cell and its neighbours have been searched
+    point = np.array(ground(SEARCH_LOCATION, coverage=coverage, datum=datum))
+    distance = np.hypot(*(point - datum))
+    assert 60.0 < distance < 70.0  # the nearest ring of unsearched cells (2 cells = 62.5 m away)
+    np.testing.assert_allclose(ground(SEARCH_LOCATION, coverage=np.ones((32, 32), np.float32), datum=datum), datum)
+
+
+def test_explore_prefers_the_nearest_unexplored_block_and_skips_explored_ones():
+    agent = (0.0, 0.0)  # in block (0, 3)/(0, 4) boundary: cell row 1, col 16
+    first = np.array(ground(EXPLORE, agent=agent))
+    assert np.hypot(*(first - agent)) < 100.0  # a block next to the drone
+    coverage = np.zeros((32, 32), np.float32)
+    coverage[0:8, :] = 1.0  # the two southern block rows are explored
+    second = np.array(ground(EXPLORE, agent=agent, coverage=coverage))
+    assert second[0] > -50.0 + 8 * 31.25  # north of the explored band
+    np.testing.assert_allclose(ground(EXPLORE, coverage=np.ones((32, 32), np.float32)), (600.0, 100.0))  # datum
+
+
+def test_goals_are_grounded_independently_in_a_batch():
+    goals = np.array([RETURN_TO_BASE, TRACK_OBJECT, SEARCH_LOCATION, EXPLORE])
+    n = len(goals)
+    points = ground_goals(goals, np.zeros((n, 2)), np.repeat(AREA, n, 0), np.zeros((n, 32, 32), np.float32),
+                          np.tile([600.0, 100.0], (n, 1)), np.full(n, 80.0), np.tile([640.0, 80.0], (n, 1)),
+                          np.array([False, True, False, False]), np.tile([5.0, -5.0], (n, 1)))
+    np.testing.assert_allclose(points[0], (5.0, -5.0))
+    np.testing.assert_allclose(points[1], (640.0, 80.0))
+    for i, goal in ((2, SEARCH_LOCATION), (3, EXPLORE)):
+        np.testing.assert_allclose(points[i], ground(goal))

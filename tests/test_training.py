@@ -1,0 +1,153 @@
+"""The training loop: exact resume after a kill, meta transitions with K-step discounted returns, the low-level
+reward, checkpoint policies and evaluation, and the train / evaluate commands."""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from missions.mission import FlightSettings
+from policies.checkpoint_policy import CheckpointPolicy
+from policies.config import NetworkConfig, TrainConfig
+from policies.evaluation import evaluate_checkpoint
+from policies.train import Trainer
+
+SMALL = NetworkConfig(hidden=(32, 32))
+
+
+def small_config(algo: str, **overrides) -> TrainConfig:
+    settings = dict(algo=algo, seed=3, total_steps=800, num_envs=2, warmup_steps=200, batch_size=32,
+                    meta_batch_size=8, buffer_size=5_000, meta_buffer_size=1_000, checkpoint_every=400,
+                    log_every=100, eval_every=0, updates_per_step=0.5, actor=SMALL, critic=SMALL, meta_actor=SMALL,
+                    meta_critic=SMALL, flight=FlightSettings(max_steps=120, subgoal_interval=10))
+    settings.update(overrides)
+    return TrainConfig.preset("default", **settings)
+
+
+def log_rows(path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return [{k: v for k, v in row.items() if k != "steps_per_s"} for row in csv.DictReader(handle)]
+
+
+@pytest.mark.parametrize("algo", ["sac", "hrl-sac"])
+def test_resuming_after_a_kill_continues_exactly(tmp_path, algo):
+    config = small_config(algo)
+    uninterrupted = Trainer(config, tmp_path / "a")
+    uninterrupted.run(progress=False)
+    killed = Trainer(config, tmp_path / "b")
+    killed.run(progress=False, stop_at=400)  # the checkpoint at step 400 is all that survives the kill
+    resumed = Trainer(config, tmp_path / "b", resume=True)
+    assert resumed.step == 400
+    resumed.run(progress=False)
+    for a, b in zip(uninterrupted.low.actor.state_dict().values(), resumed.low.actor.state_dict().values()):
+        assert torch.equal(a, b)
+    for a, b in zip(uninterrupted.low.critic.state_dict().values(), resumed.low.critic.state_dict().values()):
+        assert torch.equal(a, b)
+    if algo == "hrl-sac":
+        for a, b in zip(uninterrupted.meta.actor.state_dict().values(), resumed.meta.actor.state_dict().values()):
+            assert torch.equal(a, b)
+    assert uninterrupted.episodes == resumed.episodes and uninterrupted.episodes > 0
+    assert log_rows(tmp_path / "a" / "progress.csv") == log_rows(tmp_path / "b" / "progress.csv")
+    np.testing.assert_array_equal(uninterrupted.obs, resumed.obs)
+
+
+def test_meta_transitions_carry_k_step_discounted_returns(tmp_path):
+    config = small_config("hrl-sac", flight=FlightSettings(max_steps=500, subgoal_interval=5), meta_gamma=0.9)
+    trainer = Trainer(config, tmp_path)
+    rewards, real_step = [], trainer.env.step
+
+    def spy(actions):
+        result = real_step(actions)
+        rewards.append(result[1].copy())
+        return result
+
+    trainer.env.step = spy
+    first_meta_obs = None
+    for t in range(5):
+        trainer.collect()
+        if t == 0:
+            first_meta_obs = trainer.segment_obs.copy()
+    meta = trainer.meta_buffer
+    assert len(meta) == 2  # one finished 5-step segment per environment
+    expected = sum(0.9 ** i * rewards[i] for i in range(5))
+    np.testing.assert_allclose(meta.data["reward"][:2], expected, rtol=1e-6)
+    np.testing.assert_allclose(meta.data["discount"][:2], 0.9 ** 5, rtol=1e-6)
+    np.testing.assert_array_equal(meta.data["obs"][:2], first_meta_obs)
+    assert trainer.needs_goal.all()
+
+
+def test_low_level_reward_is_the_negative_distance_to_the_goal_point(tmp_path):
+    config = small_config("hrl-sac", intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0, extrinsic_weight=0.0)
+    trainer = Trainer(config, tmp_path)
+    captured, real_step = {}, trainer.env.step
+
+    def spy(actions):
+        result = real_step(actions)
+        captured["info"] = result[4]
+        return result
+
+    trainer.env.step = spy
+    trainer.collect()
+    info = captured["info"]
+    distance = np.hypot(*(info["position"] - info["goal_point"]).T)
+    np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2],
+                               -distance / 100.0 + (distance <= config.flight.reach_radius_m), rtol=1e-5)
+
+
+def test_flat_sac_learns_from_the_environment_reward(tmp_path):
+    trainer = Trainer(small_config("sac"), tmp_path)
+    captured, real_step = {}, trainer.env.step
+
+    def spy(actions):
+        result = real_step(actions)
+        captured["reward"] = result[1]
+        return result
+
+    trainer.env.step = spy
+    trainer.collect()
+    np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], captured["reward"])
+    assert trainer.meta is None and not trainer.obs[:, 272:].any()  # no goal one-hot for flat SAC
+
+
+def test_checkpoint_policy_is_deterministic_and_evaluates(tmp_path):
+    Trainer(small_config("hrl-sac", total_steps=400), tmp_path).run(progress=False)
+    policy = CheckpointPolicy.load(tmp_path)
+    assert policy.hierarchical and policy.step == 400
+    obs = np.random.default_rng(0).uniform(0, 1, size=(5, 276)).astype(np.float32)
+    np.testing.assert_array_equal(policy.act(obs), policy.act(obs))
+    actions = policy.act(obs)
+    assert np.all(actions >= [-1, -1, 0, 0]) and np.all(actions <= 1)
+    assert set(policy.choose_goals(obs[:, :272]).tolist()) <= {0, 1, 2, 3}
+    metrics = evaluate_checkpoint(tmp_path, "val", 6)
+    assert metrics["episodes"] == 6 and 0.0 <= metrics["success_rate"] <= 1.0
+    assert metrics["subgoal_reachability"] is not None
+    assert metrics == evaluate_checkpoint(tmp_path, "val", 6)  # deterministic
+
+
+def test_train_and_evaluate_commands(tmp_path):
+    run = tmp_path / "run"
+    base = [sys.executable, "-m", "hrlsac_cli"]
+    result = subprocess.run([*base, "train", "--algo", "sac", "--steps", "300", "--out", str(run), "--quiet",
+                             "--set", "warmup_steps=100", "--set", "num_envs=2", "--set", "batch_size=16"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert json.loads((run / "config.json").read_text())["total_steps"] == 300
+    again = subprocess.run([*base, "train", "--algo", "sac", "--steps", "300", "--out", str(run)],
+                           capture_output=True, text=True, timeout=120)
+    assert again.returncode == 2 and "already holds a run" in again.stderr
+    bad = subprocess.run([*base, "train", "--out", str(tmp_path / "x"), "--set", "warmup=5"],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "expected FIELD=VALUE" in bad.stderr
+    evaluated = subprocess.run([*base, "evaluate", str(run), "--split", "val", "--episodes", "4"],
+                               capture_output=True, text=True, timeout=300)
+    assert evaluated.returncode == 0, evaluated.stderr
+    metrics = json.loads((run / "eval_val.json").read_text())
+    assert metrics["episodes"] == 4 and metrics["algo"] == "sac"
+    missing = subprocess.run([*base, "evaluate", str(tmp_path / "nothing")], capture_output=True, text=True,
+                             timeout=120)
+    assert missing.returncode == 2 and "no checkpoint" in missing.stderr
