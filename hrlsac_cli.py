@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("policies.train_cli", "train HRL-SAC or flat SAC on the search environment (resumable)"),
     "evaluate": ("policies.evaluate_cli", "the paper's metrics of a trained run on a scenario split"),
     "dataset": ("missions.dataset_cli", "make the synthetic SAR dataset or inspect a YOLO dataset"),
+    "compare": ("policies.compare_cli", "compare trained runs and the scripted baselines: markdown report and figures"),
 }
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"

@@ -4,7 +4,7 @@ Every network is built from :func:`mlp` / :func:`hidden_layers`, i.e. plain ``nn
 ``Linear -> LayerNorm -> ReLU -> Dropout`` so that they script with TorchScript and trace with ``torch.export``.
 The algorithms (``policies.sac``, ``policies.discrete_sac``) own the optimisers, targets and losses.
 
-Shapes in the paper preset (``TrainConfig.preset("paper")``)::
+Shapes in the paper preset (``TrainConfig.from_preset("paper")``)::
 
     SquashedGaussianActor  276 -> 512 -> 512 -> 512 -> 256 -> mean (4), log_std (4)
     TwinQ (each of two)    280 -> 512 -> 512 -> 256 -> 1

@@ -34,6 +34,7 @@ import torch
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM
 from missions.goals import GOAL_NAMES
+from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
 from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
@@ -65,8 +66,9 @@ class Trainer:
         self.hrl = cfg.algo == "hrl-sac"
         torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
-        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(split=cfg.split, flight=cfg.flight,
-                                                                    goal_conditioned=self.hrl))
+        scenarios = tuple(load_mission(path).scenario for path in cfg.missions)
+        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(split=cfg.split, scenarios=scenarios,
+                                                                    flight=cfg.flight, goal_conditioned=self.hrl))
         self.rng = np.random.default_rng(cfg.seed)
         self.normalizer = RunningMeanStd((OBS_DIM,))
         self.low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed)

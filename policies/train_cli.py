@@ -63,7 +63,7 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
             overrides = _overrides(args.set)
             if args.num_envs is not None:
                 overrides["num_envs"] = args.num_envs
-            config = TrainConfig.preset(args.preset, algo=args.algo, total_steps=args.steps, seed=args.seed,
+            config = TrainConfig.from_preset(args.preset, algo=args.algo, total_steps=args.steps, seed=args.seed,
                                         **overrides)
             trainer = Trainer(config, run_dir)
     except (ValueError, TypeError, FileNotFoundError) as exc:

@@ -75,7 +75,7 @@ def discrete_batch(rng: np.random.Generator, b: int, obs_dim: int = 3, n: int = 
 
 # ---------------------------------------------------------------------------------------------------- shapes
 def test_paper_preset_network_shapes():
-    cfg = TrainConfig.preset("paper")
+    cfg = TrainConfig.from_preset("paper")
     actor = SquashedGaussianActor(276, 4, cfg.actor, cfg.log_std_bounds)
     assert linear_shapes(actor.trunk) == [(276, 512), (512, 512), (512, 512), (512, 256)]
     assert linear_shapes(actor.mean) == [(256, 4)] and linear_shapes(actor.log_std) == [(256, 4)]
@@ -104,7 +104,7 @@ def test_paper_preset_network_shapes():
 
 
 def test_default_preset_has_no_dropout_and_agents_build_from_presets():
-    cfg = TrainConfig.preset("default")
+    cfg = TrainConfig.from_preset("default")
     agent = SAC(276, 4, ENV_LOW, ENV_HIGH, cfg)
     assert linear_shapes(agent.actor.trunk) == [(276, 256), (256, 256)]
     assert linear_shapes(agent.critic.q1) == [(280, 256), (256, 256), (256, 1)]
@@ -373,7 +373,7 @@ def test_target_critics_move_by_tau():
 
 # ---------------------------------------------------------------------------------------------------- determinism
 def test_deterministic_act_is_repeatable_in_eval_mode_paper_preset():
-    cfg = TrainConfig.preset("paper")
+    cfg = TrainConfig.from_preset("paper")
     agent = SAC(276, 4, ENV_LOW, ENV_HIGH, cfg, seed=3)
     obs = np.random.default_rng(0).standard_normal((5, 276)).astype(np.float32)
     first, second = agent.act(obs, deterministic=True), agent.act(obs, deterministic=True)

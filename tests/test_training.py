@@ -26,7 +26,7 @@ def small_config(algo: str, **overrides) -> TrainConfig:
                     log_every=100, eval_every=0, updates_per_step=0.5, actor=SMALL, critic=SMALL, meta_actor=SMALL,
                     meta_critic=SMALL, flight=FlightSettings(max_steps=120, subgoal_interval=10))
     settings.update(overrides)
-    return TrainConfig.preset("default", **settings)
+    return TrainConfig.from_preset("default", **settings)
 
 
 def log_rows(path) -> list[dict]:

@@ -1,0 +1,182 @@
+"""Training speed: flat SAC environment steps per second with one gradient update per step, ours vs Stable-Baselines3.
+
+For each network preset both agents train on SarSearch-v0 (the same environment, flight settings and scenario split)
+with one gradient update of batch 128 per environment step, one environment, one torch thread, in the same run
+(the agents take turns inside every repeat, so a change of machine load hits all of them alike):
+
+  * ours:      policies.train.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
+               the preset's networks (LayerNorm after each hidden layer, no dropout).
+  * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
+  * sb3:       stable_baselines3.SAC("MlpPolicy", train_freq=1, gradient_steps=1, batch_size=128,
+               learning_starts=--warmup, net_arch=hidden widths, device="cpu") on policies.env.SarSearchEnv.
+  * ours_vec8: extra line, NOT the same work: our vectorised configuration, num_envs=8 and updates_per_step=0.125
+               (one update per 8 environment steps).
+
+Only steady-state training is timed: each run first takes --warmup uniformly random steps (untimed; learning starts
+at its end), then the clock runs over the next --steps (--steps-3x512) steps. Our final checkpoint (run() always
+writes one) is outside the clock; checkpoint_every and log_every are set past the end of the run.
+
+Ours still does more per step than SB3: prioritised replay (sum-tree sampling, importance weights, priority
+updates) and the running observation normaliser, which SB3's uniform replay and raw observations do not have.
+
+Figures: steps/s by the wall clock (the headline; medians over --repeats) and by process CPU time (less sensitive
+to other processes on a shared machine). Targets: ours >= 1.5 x SB3 at the default preset (2 x 256) and >= 1.1 x
+at 3 x 512.
+
+Usage: python benchmarks/train_speed.py [--steps 2000] [--steps-3x512 600] [--warmup 1000] [--repeats 3]
+                                        [--presets default,3x512]
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+
+import torch
+
+from policies.config import NetworkConfig, TrainConfig
+from policies.env import SarSearchEnv
+from policies.env_core import SarSearchConfig
+from policies.train import Trainer
+
+from common import summarise, write_report
+
+PRESETS = {"default": (256, 256), "3x512": (512, 512, 512)}
+TARGETS = {"default": 1.5, "3x512": 1.1}
+BATCH_SIZE = 128
+BUFFER_SIZE = 100_000
+AGENTS = ("ours", "ours_noln", "sb3", "ours_vec8")
+LABELS = {"ours": "ours (LayerNorm, as shipped)", "ours_noln": "ours (no LayerNorm = SB3 shape)",
+          "sb3": "Stable-Baselines3 SAC", "ours_vec8": "ours, 8 envs, 1 update / 8 steps"}
+
+
+def our_config(hidden: tuple[int, ...], layer_norm: bool, num_envs: int, updates_per_step: float, warmup: int,
+               steps: int, seed: int) -> TrainConfig:
+    net = NetworkConfig(hidden=hidden, layer_norm=layer_norm, dropout=0.0)
+    return TrainConfig.from_preset("default", algo="sac", seed=seed, num_envs=num_envs, updates_per_step=updates_per_step,
+                              warmup_steps=warmup, total_steps=warmup + steps, batch_size=BATCH_SIZE,
+                              buffer_size=BUFFER_SIZE, actor=net, critic=net, checkpoint_every=10**9,
+                              log_every=10**9, torch_threads=1)
+
+
+def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, float]:
+    """(wall, CPU) steps/s of Trainer.run over ``steps`` steps after ``warmup`` untimed random ones."""
+    with tempfile.TemporaryDirectory() as run_dir:
+        trainer = Trainer(config, run_dir)
+        trainer.run(progress=False, stop_at=warmup)
+        clock: dict[str, tuple[float, float]] = {}
+        save = trainer.save
+
+        def save_after_clock():  # run() ends with a checkpoint: stop the clock first
+            clock.setdefault("end", (time.perf_counter(), time.process_time()))
+            return save()
+
+        trainer.save = save_after_clock
+        first, first_updates = trainer.step, trainer.low.num_updates
+        wall, cpu = time.perf_counter(), time.process_time()
+        trainer.run(progress=False, stop_at=warmup + steps)
+        done, updates = trainer.step - first, trainer.low.num_updates - first_updates
+        expected = round(done * config.updates_per_step)
+        if done != steps or updates != expected:
+            raise RuntimeError(f"ours: timed {done} steps with {updates} updates, expected {steps} and {expected}")
+        return done / (clock["end"][0] - wall), done / (clock["end"][1] - cpu)
+
+
+def time_sb3(hidden: tuple[int, ...], flight, warmup: int, steps: int, seed: int) -> tuple[float, float]:
+    """(wall, CPU) steps/s of SB3's SAC.learn over ``steps`` steps after ``warmup`` untimed random ones."""
+    from stable_baselines3 import SAC as SB3SAC
+
+    model = SB3SAC("MlpPolicy", SarSearchEnv(SarSearchConfig(flight=flight)), learning_rate=3e-4,
+                   buffer_size=BUFFER_SIZE, learning_starts=warmup, batch_size=BATCH_SIZE, tau=0.005, gamma=0.99,
+                   train_freq=1, gradient_steps=1, policy_kwargs={"net_arch": list(hidden)}, device="cpu", seed=seed,
+                   verbose=0)
+    model.learn(warmup)  # random actions only: SB3 trains once num_timesteps > learning_starts
+    first, first_updates = model.num_timesteps, model._n_updates
+    wall, cpu = time.perf_counter(), time.process_time()
+    model.learn(steps, reset_num_timesteps=False)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    done, updates = model.num_timesteps - first, model._n_updates - first_updates
+    if done != steps or updates != steps:
+        raise RuntimeError(f"sb3: timed {done} steps with {updates} updates, expected {steps} of each")
+    return done / wall, done / cpu
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=2_000, help="timed steps per run at the default preset")
+    parser.add_argument("--steps-3x512", type=int, default=600, help="timed steps per run at 3 x 512")
+    parser.add_argument("--warmup", type=int, default=1_000, help="untimed random steps before each timed run")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--presets", default="default,3x512", help=f"comma-separated, from {', '.join(PRESETS)}")
+    parser.add_argument("--out", default="benchmarks/results/train_speed.json")
+    args = parser.parse_args()
+    presets = [name.strip() for name in args.presets.split(",") if name.strip()]
+    if unknown := [name for name in presets if name not in PRESETS]:
+        parser.error(f"unknown preset(s) {unknown}; choose from {', '.join(PRESETS)}")
+    if args.warmup % 8 or args.warmup < BATCH_SIZE:
+        parser.error("--warmup must be a multiple of 8 (the vectorised run) and at least the batch size")
+    torch.set_num_threads(1)
+    flight = TrainConfig().flight
+    steps = {"default": args.steps, "3x512": args.steps_3x512}
+    steps = {name: max(8, steps[name] // 8 * 8) for name in presets}  # whole vector steps for ours_vec8
+
+    report: dict = {"warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats, "torch_threads": 1,
+                    "batch_size": BATCH_SIZE, "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
+    table = []
+    for name in presets:
+        hidden, n = PRESETS[name], steps[name]
+        wall: dict[str, list[float]] = {agent: [] for agent in AGENTS}
+        cpu: dict[str, list[float]] = {agent: [] for agent in AGENTS}
+        for repeat in range(args.repeats):
+            runs = {
+                "ours": lambda: time_ours(our_config(hidden, True, 1, 1.0, args.warmup, n, repeat), args.warmup, n),
+                "ours_noln": lambda: time_ours(our_config(hidden, False, 1, 1.0, args.warmup, n, repeat),
+                                               args.warmup, n),
+                "sb3": lambda: time_sb3(hidden, flight, args.warmup, n, repeat),
+                "ours_vec8": lambda: time_ours(our_config(hidden, True, 8, 0.125, args.warmup, n, repeat),
+                                               args.warmup, n),
+            }
+            for agent in AGENTS:
+                w, c = runs[agent]()
+                wall[agent].append(w)
+                cpu[agent].append(c)
+            print(f"{name} run {repeat + 1}/{args.repeats}: "
+                  + ", ".join(f"{agent} {wall[agent][-1]:,.1f}/s" for agent in AGENTS), flush=True)
+        medians = summarise({f"{agent}_steps_per_s": wall[agent] for agent in AGENTS},
+                            f"{name} ({' x '.join(map(str, hidden))}): wall-clock steps/s, medians over "
+                            f"{args.repeats} runs of {n:,} timed steps")
+        cpu_medians = {agent: statistics.median(cpu[agent]) for agent in AGENTS}
+        ratio = {agent: medians[f"{agent}_steps_per_s"] / medians["sb3_steps_per_s"] for agent in AGENTS}
+        cpu_ratio = {agent: cpu_medians[agent] / cpu_medians["sb3"] for agent in AGENTS}
+        report["presets"][name] = {
+            "hidden": list(hidden), "timed_steps": n, "medians_wall_steps_per_s": medians,
+            "medians_cpu_steps_per_s": {f"{agent}_steps_per_s": v for agent, v in cpu_medians.items()},
+            "ratio_to_sb3_wall": ratio, "ratio_to_sb3_cpu": cpu_ratio,
+            "runs_wall_steps_per_s": wall, "runs_cpu_steps_per_s": cpu,
+        }
+        table.append((name, hidden, medians, cpu_medians, ratio, cpu_ratio))
+
+    print("\nflat SAC training, one env, 1 update of batch 128 per env step, 1 torch thread (medians):")
+    print(f"  {'preset':9s} {'agent':34s} {'steps/s':>9s} {'x SB3':>7s} {'CPU steps/s':>12s} {'x SB3':>7s}")
+    for name, hidden, medians, cpu_medians, ratio, cpu_ratio in table:
+        for agent in AGENTS:
+            extra = "   (not the same work)" if agent == "ours_vec8" else ""
+            print(f"  {name:9s} {LABELS[agent]:34s} {medians[f'{agent}_steps_per_s']:9,.1f} {ratio[agent]:6.2f}x "
+                  f"{cpu_medians[agent]:12,.1f} {cpu_ratio[agent]:6.2f}x{extra}")
+    verdicts = {}
+    for name, hidden, medians, cpu_medians, ratio, cpu_ratio in table:
+        target = TARGETS[name]
+        verdicts[name] = {agent: bool(ratio[agent] >= target) for agent in ("ours", "ours_noln")}
+        print(f"{name} ({' x '.join(map(str, hidden))}), target >= {target}x SB3: "
+              f"as shipped {ratio['ours']:.2f}x -> {'meets' if verdicts[name]['ours'] else 'MISSES'}; "
+              f"same shape without LayerNorm {ratio['ours_noln']:.2f}x -> "
+              f"{'meets' if verdicts[name]['ours_noln'] else 'MISSES'}")
+    report["meets_target"] = verdicts
+    write_report(args.out, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,405 @@
+"""Comparing trained runs (HRL-SAC, flat SAC) with the scripted baselines: statistics, a markdown report, figures.
+
+:func:`compare` reads run folders written by ``hrlsac train`` (``config.json``, ``progress.csv`` and the
+``eval_<split>.json`` of ``hrlsac evaluate``), groups them by (algo, preset), evaluates the scripted baselines on
+the same scenarios with the same flight settings, and writes ``report.md``, ``summary.json``,
+``training_curves.png`` and ``boxplots.png`` into the output folder.
+
+Statistics of a group of seeds: the per-seed success rates give a mean, a sample standard deviation and a 95 %
+Student-t interval across seeds (clipped to [0, 1]); all episodes pooled give a success rate with a Wilson
+interval, reward / coverage / length means and standard deviations (population, as the evaluation's), the median
+time to first detection and the median steps to success.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shlex
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from policies.evaluation_stats import wilson_interval
+
+ALGO_LABELS = {"hrl-sac": "HRL-SAC", "sac": "flat SAC"}
+BASELINE_LABELS = {"random": "Random", "expanding_square": "Expanding square", "parallel_track": "Parallel track"}
+CURVE_COLUMNS = (("success_rate", "Success rate"), ("mean_return", "Return"),
+                 ("mean_coverage", "Coverage ratio"), ("mean_length", "Episode length (steps)"))
+TEST_KEYS = {"success_rate": "success_rate", "mean_return": "reward_mean", "mean_coverage": "coverage_mean",
+             "mean_length": "length_mean"}
+REQUIRED_METRICS = ("episodes", "success_rate", "reward_mean", "reward_std", "coverage_mean", "coverage_std",
+                    "length_mean", "length_std")
+DEFAULT_EPISODES = 100
+
+# Two-sided 95 % Student-t quantiles t(0.975, dof); between the tabled dof, interpolated linearly in 1/dof.
+_T975 = {1: 12.706205, 2: 4.302653, 3: 3.182446, 4: 2.776445, 5: 2.570582, 6: 2.446912, 7: 2.364624,
+         8: 2.306004, 9: 2.262157, 10: 2.228139, 11: 2.200985, 12: 2.178813, 13: 2.160369, 14: 2.144787,
+         15: 2.131450, 16: 2.119905, 17: 2.109816, 18: 2.100922, 19: 2.093024, 20: 2.085963, 21: 2.079614,
+         22: 2.073873, 23: 2.068658, 24: 2.063899, 25: 2.059539, 26: 2.055529, 27: 2.051831, 28: 2.048407,
+         29: 2.045230, 30: 2.042272, 40: 2.021075, 60: 2.000298, 120: 1.979930}
+_Z975 = 1.959963984540054
+
+
+class CompareError(ValueError):
+    """A problem with the inputs of a comparison; its message is one line meant for the user."""
+
+
+# ---------------------------------------------------------------------------------------------- statistics
+def t_quantile_975(dof: int) -> float:
+    """The 0.975 quantile of Student's t with ``dof`` degrees of freedom (the 95 % two-sided critical value)."""
+    if dof < 1:
+        raise ValueError(f"dof must be >= 1, got {dof}")
+    if dof in _T975:
+        return _T975[dof]
+    tabled = sorted(_T975)
+    lower = max(d for d in tabled if d < dof)
+    upper = min((d for d in tabled if d > dof), default=None)
+    t_upper, inv_upper = (_Z975, 0.0) if upper is None else (_T975[upper], 1.0 / upper)
+    share = (1.0 / lower - 1.0 / dof) / (1.0 / lower - inv_upper)
+    return _T975[lower] + share * (t_upper - _T975[lower])
+
+
+def t_interval(values) -> tuple[float, float | None, tuple[float, float] | None]:
+    """Mean, sample standard deviation and 95 % t-interval of the mean (None for fewer than 2 values)."""
+    values = np.asarray(values, dtype=np.float64)
+    mean = float(values.mean())
+    if len(values) < 2:
+        return mean, None, None
+    std = float(values.std(ddof=1))
+    half = t_quantile_975(len(values) - 1) * std / math.sqrt(len(values))
+    return mean, std, (mean - half, mean + half)
+
+
+def intervals_overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    return a[0] <= b[1] and b[0] <= a[1]
+
+
+def _pooled_mean_std(metrics: list[dict], name: str) -> tuple[float, float]:
+    """Mean and (population) standard deviation over all episodes, from per-run means and standard deviations."""
+    n = np.array([m["episodes"] for m in metrics], dtype=np.float64)
+    means = np.array([m[f"{name}_mean"] for m in metrics], dtype=np.float64)
+    stds = np.array([m[f"{name}_std"] for m in metrics], dtype=np.float64)
+    mean = float((n * means).sum() / n.sum())
+    return mean, float(math.sqrt((n * (stds ** 2 + (means - mean) ** 2)).sum() / n.sum()))
+
+
+def _median(values) -> float | None:
+    return float(np.median(values)) if len(values) else None
+
+
+def pooled_stats(metrics: list[dict]) -> dict:
+    """Statistics over all episodes of one or more evaluations (seeds of one method, or one baseline)."""
+    episodes = sum(int(m["episodes"]) for m in metrics)
+    successes = sum(int(round(m["success_rate"] * m["episodes"])) for m in metrics)
+    per_episode = [m.get("per_episode") for m in metrics]
+    stats = {"episodes": episodes, "successes": successes, "success": successes / episodes,
+             "wilson95": list(wilson_interval(successes, episodes))}
+    for name in ("reward", "coverage", "length"):
+        stats[f"{name}_mean"], stats[f"{name}_std"] = _pooled_mean_std(metrics, name)
+    weights = np.array([m["episodes"] for m in metrics], dtype=np.float64) / episodes
+    for name in ("collision_rate", "out_of_bounds_rate", "detection_rate"):
+        values = [m.get(name) for m in metrics]
+        stats[name] = None if None in values else float(np.dot(weights, values))
+    reach = [m["subgoal_reachability"] for m in metrics if m.get("subgoal_reachability") is not None]
+    stats["subgoal_reachability"] = float(np.mean(reach)) if reach else None
+    if all(p is not None for p in per_episode):
+        first = np.concatenate([np.asarray(p["first_detection"], dtype=np.float64) for p in per_episode])
+        success = np.concatenate([np.asarray(p["success"], dtype=bool) for p in per_episode])
+        length = np.concatenate([np.asarray(p["length"], dtype=np.float64) for p in per_episode])
+        stats["median_time_to_detection"] = _median(first[first >= 0])
+        stats["median_steps_to_success"] = _median(length[success])
+    else:
+        stats["median_time_to_detection"] = stats["median_steps_to_success"] = None
+    return stats
+
+
+def group_stats(metrics: list[dict]) -> dict:
+    """:func:`pooled_stats` plus the across-seed statistics of the success rate."""
+    rates = [float(m["success_rate"]) for m in metrics]
+    mean, std, interval = t_interval(rates)
+    if interval is not None:
+        interval = (max(0.0, interval[0]), min(1.0, interval[1]))
+    return {"seeds": len(metrics), "seed_success": rates, "success_mean": mean, "success_std": std,
+            "success_t95": list(interval) if interval else None, **pooled_stats(metrics)}
+
+
+# ---------------------------------------------------------------------------------------------- loading
+@dataclass
+class Run:
+    """One run folder: its config, its evaluation on the split and its training log."""
+
+    path: Path
+    config: dict
+    metrics: dict | None = None
+    progress: dict[str, np.ndarray] | None = None
+    eval_command: str = ""
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return self.config["algo"], self.config["preset"]
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CompareError(f"{path}: unreadable {what} ({_one_line(exc)})") from None
+    if not isinstance(data, dict):
+        raise CompareError(f"{path}: unreadable {what} (expected a JSON object)")
+    return data
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def read_progress(path: Path) -> dict[str, np.ndarray] | None:
+    """The columns of a ``progress.csv`` as float arrays sorted by step; None when the file does not exist."""
+    if not path.exists():
+        return None
+    try:
+        with open(path, newline="") as handle:
+            reader = csv.DictReader(handle)
+            missing = [c for c in ("step", *(name for name, _ in CURVE_COLUMNS)) if c not in (reader.fieldnames or ())]
+            if missing:
+                raise ValueError(f"missing column(s) {', '.join(missing)}")
+            rows = [row for row in reader if row.get("step") not in (None, "")]  # a half-written last line
+            data = {name: np.array([float(row[name]) if row.get(name) not in (None, "") else math.nan
+                                    for row in rows]) for name in reader.fieldnames}
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError) as exc:
+        raise CompareError(f"{path}: unreadable CSV ({_one_line(exc)})") from None
+    order = np.argsort(data["step"], kind="stable")
+    return {name: values[order] for name, values in data.items()}
+
+
+def load_runs(paths: list, split: str) -> list[Run]:
+    """Config, existing evaluation and training log of each folder (no evaluation is run here)."""
+    if not paths:
+        raise CompareError("no runs given (pass one or more run folders written by hrlsac train)")
+    runs, seen = [], set()
+    for given in paths:
+        path = Path(given)
+        if not path.is_dir():
+            raise CompareError(f"{path}: no such run folder")
+        if path.resolve() in seen:
+            raise CompareError(f"{path}: run folder given twice")
+        seen.add(path.resolve())
+        if not (path / "config.json").is_file():
+            raise CompareError(f"{path}: no config.json (not a run folder written by hrlsac train)")
+        config = _read_json(path / "config.json", "config.json")
+        if config.get("algo") not in ALGO_LABELS or "flight" not in config or "seed" not in config:
+            raise CompareError(f"{path / 'config.json'}: not a training config (needs algo, seed and flight)")
+        config.setdefault("preset", "default")
+        run = Run(path, config, progress=read_progress(path / "progress.csv"))
+        eval_path = path / f"eval_{split}.json"
+        if eval_path.exists():
+            run.metrics = _check_metrics(_read_json(eval_path, "evaluation"), eval_path, run, split)
+        runs.append(run)
+    return runs
+
+
+def _check_metrics(metrics: dict, path: Path, run: Run, split: str) -> dict:
+    missing = [key for key in REQUIRED_METRICS if key not in metrics]
+    if missing:
+        raise CompareError(f"{path}: not an evaluation of hrlsac evaluate (missing {', '.join(missing)})")
+    if metrics.get("split", split) != split:
+        raise CompareError(f"{path}: evaluated on split {metrics['split']!r}, not {split!r}")
+    if metrics.get("algo", run.config["algo"]) != run.config["algo"]:
+        raise CompareError(f"{path}: evaluation of {metrics['algo']}, but config.json says {run.config['algo']}")
+    return metrics
+
+
+def common_flight(runs: list[Run]):
+    """The runs' shared FlightSettings; a one-line error naming the first difference otherwise."""
+    from missions.mission import FlightSettings
+
+    first = runs[0]
+    for run in runs[1:]:
+        if run.config["flight"] != first.config["flight"]:
+            diff = sorted(k for k in set(first.config["flight"]) | set(run.config["flight"])
+                          if first.config["flight"].get(k) != run.config["flight"].get(k))
+            detail = ", ".join(f"{k} {first.config['flight'].get(k)} vs {run.config['flight'].get(k)}" for k in diff)
+            raise CompareError(f"runs disagree on flight settings: {first.path} and {run.path} differ in {detail}")
+    try:
+        return FlightSettings(**first.config["flight"])
+    except (TypeError, ValueError) as exc:
+        raise CompareError(f"{first.path / 'config.json'}: bad flight settings ({_one_line(exc)})") from None
+
+
+def resolve_episodes(runs: list[Run], episodes: int | None, split: str, evaluate: bool) -> int:
+    """The episode count every method is compared on; checks that existing evaluations match it."""
+    if episodes is None:
+        counts = sorted({int(r.metrics["episodes"]) for r in runs if r.metrics is not None})
+        if len(counts) > 1:
+            raise CompareError(f"the runs' eval_{split}.json files disagree on the episode count "
+                               f"({', '.join(map(str, counts))}); pass --episodes N (with --evaluate to re-evaluate)")
+        episodes = counts[0] if counts else DEFAULT_EPISODES
+    if episodes < 1:
+        raise CompareError(f"--episodes must be >= 1, got {episodes}")
+    for run in runs:
+        hint = f"run 'hrlsac evaluate {run.path} --split {split} --episodes {episodes}' or pass --evaluate"
+        if run.metrics is None and not evaluate:
+            raise CompareError(f"{run.path}: no eval_{split}.json ({hint})")
+        if run.metrics is not None and int(run.metrics["episodes"]) != episodes and not evaluate:
+            raise CompareError(f"{run.path}: eval_{split}.json has {run.metrics['episodes']} episodes, "
+                               f"not {episodes} ({hint})")
+    return episodes
+
+
+# ---------------------------------------------------------------------------------------------- commands
+def train_command(run: Run) -> str:
+    """The ``hrlsac train`` command that makes this run's config.json (nested overrides as a comment)."""
+    from policies.config import TrainConfig
+
+    cfg = run.config
+    args = ["hrlsac", "train", "--algo", cfg["algo"], "--preset", cfg["preset"],
+            "--steps", str(cfg.get("total_steps")), "--seed", str(cfg["seed"])]
+    try:
+        base = json.loads(json.dumps(TrainConfig.from_preset(cfg["preset"], algo=cfg["algo"], seed=cfg["seed"],
+                                                        total_steps=cfg.get("total_steps")).to_dict()))
+    except (TypeError, ValueError):
+        base = {}
+    notes = []
+    for key, value in cfg.items():
+        if key in ("algo", "preset", "seed", "total_steps") or base.get(key) == value:
+            continue
+        if key == "num_envs":
+            args += ["--num-envs", str(value)]
+        elif isinstance(value, dict) or key not in base:
+            old = base.get(key) if isinstance(base.get(key), dict) else {}
+            notes += [f"{key}.{k}={json.dumps(v)}" for k, v in value.items() if old.get(k) != v] \
+                if isinstance(value, dict) else [f"{key}={json.dumps(value)}"]
+        else:
+            args += ["--set", f"{key}={json.dumps(value)}"]
+    command = shlex.join(args + ["--out", str(run.path)])
+    return command + (f"  # config.json also sets {', '.join(notes)} (not settable from the command line)"
+                      if notes else "")
+
+
+# ---------------------------------------------------------------------------------------------- the comparison
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _say(stream: TextIO | None, text: str, end: str = "\n") -> None:
+    if stream is not None:
+        print(text, end=end, file=stream, flush=True)
+
+
+def label_of(key: tuple[str, str]) -> str:
+    return f"{ALGO_LABELS.get(key[0], key[0])} ({key[1]})"
+
+
+def compare(runs: list, out, split: str = "test", episodes: int | None = None, evaluate: bool = False,
+            command: str | None = None, progress: TextIO | bool | None = True) -> dict:
+    """Compare run folders and the scripted baselines on ``split``; writes the report and figures into ``out``.
+
+    Missing (or differently sized) evaluations are computed with ``evaluate=True`` and saved as
+    ``RUN/eval_<split>.json``; without it they are a :class:`CompareError`. ``episodes`` None takes the count of
+    the runs' evaluation files (100 when there are none). ``progress``: True prints one line per run and baseline
+    to stderr, a stream prints there, None/False is silent. ``command`` is the command line recorded in the report
+    (default: reconstructed). Returns the summary written to ``out/summary.json`` plus the paths of the files.
+    """
+    from policies.baselines import BASELINES
+
+    progress = sys.stderr if progress is True else (progress or None)
+    loaded = load_runs(list(runs), split)
+    flight = common_flight(loaded)
+    episodes = resolve_episodes(loaded, episodes, split, evaluate)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise CompareError(f"--out {out}: exists and is not a folder")
+    for i, run in enumerate(loaded, 1):
+        what = (f"[run {i}/{len(loaded)}] {run.path}: {run.config['algo']} ({run.config['preset']}) "
+                f"seed {run.config['seed']}")
+        run.eval_command = shlex.join(["hrlsac", "evaluate", str(run.path), "--split", split,
+                                       "--episodes", str(episodes)])
+        if run.metrics is not None and int(run.metrics["episodes"]) == episodes:
+            _say(progress, f"{what}: eval_{split}.json, success {run.metrics['success_rate']:.1%}")
+            continue
+        _say(progress, f"{what}: evaluating on {split} ({episodes} episodes) ... ", end="")
+        started = time.perf_counter()
+        run.metrics = _evaluate(run, split, episodes)
+        _say(progress, f"success {run.metrics['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
+    baselines = {}
+    for i, name in enumerate(BASELINES, 1):
+        _say(progress, f"[baseline {i}/{len(BASELINES)}] {name} on {split} ({episodes} episodes) ... ", end="")
+        started = time.perf_counter()
+        baselines[name] = _run_baseline(name, split, episodes, flight)
+        _say(progress, f"success {baselines[name]['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
+
+    groups: dict[tuple[str, str], list[Run]] = {}
+    for run in sorted(loaded, key=lambda r: (list(ALGO_LABELS).index(r.key[0]), r.key[1], r.config["seed"])):
+        groups.setdefault(run.key, []).append(run)
+    if command is None:
+        command = shlex.join(["hrlsac", "compare", *map(str, runs), "--out", str(out), "--split", split,
+                              "--episodes", str(episodes)])
+    summary = {
+        "split": split, "episodes": episodes, "flight": loaded[0].config["flight"], "command": command,
+        "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "groups": [{"label": label_of(key), "algo": key[0], "preset": key[1], "runs": [str(r.path) for r in members],
+                    "seeds": [r.config["seed"] for r in members], **group_stats([r.metrics for r in members])}
+                   for key, members in groups.items()],
+        "baselines": [{"label": BASELINE_LABELS.get(name, name), "baseline": name,
+                       **pooled_stats([metrics])} for name, metrics in baselines.items()],
+    }
+    summary["verdicts"] = verdicts(summary["groups"])
+    out.mkdir(parents=True, exist_ok=True)
+    from policies.compare_report import plot_boxplots, plot_training_curves, render_report  # it imports us
+
+    files = {"report": out / "report.md", "summary": out / "summary.json",
+             "training_curves": out / "training_curves.png", "boxplots": out / "boxplots.png"}
+    plot_training_curves(groups, summary, files["training_curves"])
+    plot_boxplots(groups, baselines, summary, files["boxplots"])
+    _write_atomic(files["summary"], json.dumps(summary, indent=2))
+    _write_atomic(files["report"], render_report(summary, groups, flight))
+    summary["files"] = {name: str(path) for name, path in files.items()}
+    return summary
+
+
+def _evaluate(run: Run, split: str, episodes: int) -> dict:
+    from policies.evaluation import evaluate_checkpoint
+
+    try:
+        metrics = evaluate_checkpoint(run.path, split, episodes)
+    except (FileNotFoundError, ValueError, KeyError, RuntimeError) as exc:
+        raise CompareError(f"{run.path}: cannot evaluate ({_one_line(exc)})") from None
+    _write_atomic(run.path / f"eval_{split}.json", json.dumps(metrics, indent=2))
+    return metrics
+
+
+def _run_baseline(name: str, split: str, episodes: int, flight) -> dict:
+    from policies.baseline_eval import run_baseline
+
+    return run_baseline(name, split, episodes, flight)
+
+
+def verdicts(groups: list[dict]) -> list[dict]:
+    """HRL-SAC against flat SAC of the same preset: do their 95 % intervals overlap (across seeds; pooled)?"""
+    by_key = {(g["algo"], g["preset"]): g for g in groups}
+    found = []
+    for (algo, preset), hrl in by_key.items():
+        sac = by_key.get(("sac", preset))
+        if algo != "hrl-sac" or sac is None:
+            continue
+        seeds_ok = hrl["success_t95"] is not None and sac["success_t95"] is not None
+        found.append({
+            "preset": preset, "hrl": hrl["label"], "sac": sac["label"],
+            "hrl_success_mean": hrl["success_mean"], "sac_success_mean": sac["success_mean"],
+            "seed_intervals_overlap": intervals_overlap(hrl["success_t95"], sac["success_t95"]) if seeds_ok else None,
+            "pooled_intervals_overlap": intervals_overlap(hrl["wilson95"], sac["wilson95"]),
+            "hrl_above_with_non_overlapping_intervals":
+                bool(seeds_ok and hrl["success_t95"][0] > sac["success_t95"][1]),
+        })
+    return found
+
+
+# ---------------------------------------------------------------------------------------------- the report

@@ -1,0 +1,224 @@
+"""``hrlsac compare``: statistics across seeds, the report, the figures and the one-line errors.
+
+The run folders are fakes with known numbers (config.json from the real presets, progress.csv rows, and
+eval_test.json made by the evaluation's own ``summarise``); the scripted baselines really fly, on a few episodes.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from policies import compare_cli
+from policies.compare import compare, t_interval, t_quantile_975
+from policies.config import TrainConfig
+from policies.evaluation import summarise
+from policies.train import LOG_FIELDS
+
+EPISODES = 10
+MAX_STEPS = 500  # every fake run (and so the baselines) flies with this step limit, not the preset's 1000
+
+
+def wilson(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def episode_record(successes: int, seed: int, hierarchical: bool) -> dict[str, np.ndarray]:
+    """Per-episode outcomes with ``successes`` of EPISODES successful; deterministic in ``seed``."""
+    rng = np.random.default_rng(seed)
+    success = np.arange(EPISODES) < successes
+    length = np.where(success, rng.integers(50, 400, EPISODES), MAX_STEPS)
+    first = np.where(success, length - rng.integers(5, 40, EPISODES), np.where(np.arange(EPISODES) % 3 == 0, 200, -1))
+    segments = np.full(EPISODES, 6 if hierarchical else 0)
+    return {"success": success, "collision": np.zeros(EPISODES, bool), "out_of_bounds": np.zeros(EPISODES, bool),
+            "length": length, "first_detection": first,
+            "episode_return": np.where(success, 100.0, 0.0) - 0.1 * length + rng.normal(0, 3, EPISODES),
+            "coverage": rng.uniform(0.05, 0.4, EPISODES), "subgoal_segments": segments,
+            "subgoals_reached": (segments * (0.5 + 0.1 * seed)).astype(np.int64)}
+
+
+def make_run(root: Path, name: str, algo: str, seed: int, successes: int, **overrides) -> tuple[Path, dict]:
+    """A run folder as hrlsac train + hrlsac evaluate leave it; returns (folder, per-episode record)."""
+    run = root / name
+    run.mkdir()
+    config = TrainConfig.from_preset("default", algo=algo, seed=seed, total_steps=20_000, **overrides).to_dict()
+    config["flight"]["max_steps"] = MAX_STEPS
+    (run / "config.json").write_text(json.dumps(config, indent=2))
+    with open(run / "progress.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
+        writer.writeheader()
+        for i, step in enumerate(range(1_000, 20_001, 1_000)):
+            learned = min(1.0, i / 15) * successes / EPISODES
+            writer.writerow({**{k: math.nan for k in LOG_FIELDS}, "step": step, "episodes": 5 * i,
+                             "success_rate": math.nan if i == 0 else learned, "mean_return": 100 * learned - 40,
+                             "mean_length": MAX_STEPS - 300 * learned, "mean_coverage": 0.1 + 0.2 * learned,
+                             "steps_per_s": 300.0})
+    record = episode_record(successes, seed, algo == "hrl-sac")
+    metrics = {"algo": algo, "preset": "default", "seed": seed, "checkpoint": str(run / "checkpoint.pt"),
+               "trained_steps": 20_000, "split": "test", "max_steps": MAX_STEPS, **summarise(record)}
+    (run / "eval_test.json").write_text(json.dumps(metrics, indent=2))
+    return run, record
+
+
+@pytest.fixture
+def runs(tmp_path):
+    """Three HRL-SAC seeds (6, 7, 8 of 10 successes) and three flat SAC seeds (1, 2, 3 of 10)."""
+    made = {}
+    for seed, (hrl, sac) in enumerate([(6, 1), (7, 2), (8, 3)]):
+        made[("hrl-sac", seed)] = make_run(tmp_path, f"hrl-{seed}", "hrl-sac", seed, hrl,
+                                           **({"num_envs": 4, "warmup_steps": 500} if seed == 0 else {}))
+        made[("sac", seed)] = make_run(tmp_path, f"sac-{seed}", "sac", seed, sac)
+    return made
+
+
+def test_t_quantiles_match_the_t_distribution():
+    assert t_quantile_975(2) == pytest.approx(4.302653, abs=1e-6)
+    assert t_quantile_975(30) > t_quantile_975(35) > t_quantile_975(40)
+    assert t_quantile_975(10_000) == pytest.approx(1.96, abs=2e-3)
+    scipy_stats = pytest.importorskip("scipy.stats")
+    for dof in (1, 2, 3, 5, 9, 19, 29, 35, 50, 80, 200, 1000):
+        assert t_quantile_975(dof) == pytest.approx(scipy_stats.t.ppf(0.975, dof), rel=2e-3)
+    mean, std, (low, high) = t_interval([0.6, 0.7, 0.8])
+    assert (mean, std) == pytest.approx((0.7, 0.1))
+    assert (low, high) == pytest.approx((0.7 - 4.302653 * 0.1 / math.sqrt(3), 0.7 + 4.302653 * 0.1 / math.sqrt(3)))
+    assert t_interval([0.5])[1:] == (None, None)
+
+
+def test_report_statistics_verdict_commands_and_figures(runs, tmp_path):
+    out = tmp_path / "report"
+    paths = [runs[key][0] for key in sorted(runs)]
+    summary = compare(paths, out, split="test", progress=None)
+    report = (out / "report.md").read_text()
+
+    # across seeds: mean 70 %, sample std 10 points, t(2) interval; SAC's lower bound is clipped at 0
+    half = 4.302653 * 0.1 / math.sqrt(3)
+    assert f"| HRL-SAC (default) | 3 | 70.0 ± 10.0 % [{100 * (0.7 - half):.1f}, {100 * (0.7 + half):.1f}] |" in report
+    assert f"| flat SAC (default) | 3 | 20.0 ± 10.0 % [0.0, {100 * (0.2 + half):.1f}] |" in report
+    assert "[45.2, 94.8]" in report and "[0.0, 44.8]" in report
+    # pooled: 21 / 30 and 6 / 30 with Wilson intervals
+    for label, successes in (("HRL-SAC (default)", 21), ("flat SAC (default)", 6)):
+        low, high = wilson(successes, 30)
+        assert f"{100 * successes / 30:.1f} % [{100 * low:.1f}, {100 * high:.1f}]" in report
+        row = next(line for line in report.splitlines() if line.startswith(f"| {label} |"))
+        records = [runs[(("hrl-sac" if label.startswith("HRL") else "sac"), s)][1] for s in range(3)]
+        reward = np.concatenate([r["episode_return"] for r in records])
+        length = np.concatenate([r["length"] for r in records])
+        coverage = np.concatenate([r["coverage"] for r in records])
+        first = np.concatenate([r["first_detection"] for r in records])
+        assert f"{reward.mean():,.1f} ± {reward.std():,.1f}" in row
+        assert f"{coverage.mean():.3f} ± {coverage.std():.3f}" in row
+        assert f"{length.mean():,.0f} ± {length.std():,.0f}" in row
+        assert row.rstrip(" |").endswith(f"{np.median(first[first >= 0]):,.0f}")
+    hrl_row = next(line for line in report.splitlines() if line.startswith("| HRL-SAC (default) |"))
+    assert f"{100 * np.mean([3 / 6, 3 / 6, 4 / 6]):.1f} %" in hrl_row  # reachability: 3, 3 (int 3.6), 4 of 6
+    sac_row = next(line for line in report.splitlines() if line.startswith("| flat SAC (default) |"))
+    assert "| — |" in sac_row
+
+    # the verdict: 45.2 > 44.8, so HRL-SAC is above flat SAC with non-overlapping intervals
+    assert summary["verdicts"][0]["hrl_above_with_non_overlapping_intervals"] is True
+    assert "**HRL-SAC (default) is above flat SAC (default) with non-overlapping 95 % intervals across seeds**" \
+        in report
+
+    # the baselines are rows, flown with the runs' flight settings
+    for label in ("Random (scripted)", "Expanding square (scripted)", "Parallel track (scripted)"):
+        assert f"| {label} | scripted |" in report
+    assert "step limit 500" in report
+    assert all(b["episodes"] == EPISODES and b["length_mean"] <= MAX_STEPS for b in summary["baselines"])
+
+    # the commands: reconstructed training commands, evaluation commands and the compare command
+    hrl0, sac2 = runs[("hrl-sac", 0)][0], runs[("sac", 2)][0]
+    assert (f"hrlsac train --algo hrl-sac --preset default --steps 20000 --seed 0 --num-envs 4 "
+            f"--set warmup_steps=500 --out {hrl0}  # config.json also sets flight.max_steps=500") in report
+    assert f"hrlsac train --algo sac --preset default --steps 20000 --seed 2 --out {sac2}" in report
+    assert f"hrlsac evaluate {sac2} --split test --episodes {EPISODES}" in report
+    assert summary["command"] in report and summary["command"].startswith("hrlsac compare ")
+    assert "## Per-seed results" in report and "### flat SAC (default)" in report
+
+    for name in ("training_curves.png", "boxplots.png"):
+        image = cv2.imread(str(out / name))
+        assert image is not None, name
+        assert image.shape[0] >= 500 and image.shape[1] >= 1000
+        assert image.std() > 10  # not a blank canvas
+    assert json.loads((out / "summary.json").read_text())["groups"][0]["seeds"] == 3
+    assert not list(out.glob("*.tmp*"))
+
+
+def test_overlapping_intervals_and_a_single_seed_are_reported_as_such(tmp_path):
+    paths = [make_run(tmp_path, f"hrl-{s}", "hrl-sac", s, k)[0] for s, k in enumerate((5, 7, 6))]
+    paths += [make_run(tmp_path, f"sac-{s}", "sac", s, k)[0] for s, k in enumerate((4, 6, 5))]
+    summary = compare(paths, tmp_path / "a", progress=None)
+    verdict = summary["verdicts"][0]
+    assert verdict["seed_intervals_overlap"] is True and not verdict["hrl_above_with_non_overlapping_intervals"]
+    assert "the 95 % intervals across seeds overlap" in (tmp_path / "a" / "report.md").read_text()
+
+    summary = compare(paths[:1] + paths[3:4], tmp_path / "b", progress=None)
+    assert summary["verdicts"][0]["seed_intervals_overlap"] is None
+    report = (tmp_path / "b" / "report.md").read_text()
+    assert "| HRL-SAC (default) | 1 | 50.0 % (1 seed: no interval) |" in report
+    assert "there is no verdict across seeds" in report
+
+
+def test_cli_writes_the_report_and_prints_progress(runs, tmp_path):
+    paths = [str(runs[("hrl-sac", s)][0]) for s in range(2)] + [str(runs[("sac", 0)][0])]
+    result = subprocess.run([sys.executable, "-m", "hrlsac_cli", "compare", *paths, "--out", str(tmp_path / "cli"),
+                             "--episodes", str(EPISODES)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    progress = result.stderr.strip().splitlines()
+    assert len(progress) == 3 + 3 and progress[0].startswith("[run 1/3]") and progress[-1].startswith("[baseline 3/3]")
+    assert "written" in result.stdout
+    report = (tmp_path / "cli" / "report.md").read_text()
+    assert f"hrlsac compare {paths[0]} {paths[1]} {paths[2]} --out {tmp_path / 'cli'} --episodes {EPISODES}" in report
+    assert cv2.imread(str(tmp_path / "cli" / "boxplots.png")) is not None
+
+
+def _one_line_error(capsys, argv) -> str:
+    assert compare_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_errors_are_one_line_with_exit_code_2(runs, tmp_path, capsys):
+    out = str(tmp_path / "out")
+    assert "no runs given" in _one_line_error(capsys, ["--out", out])
+    assert "no runs given" in _one_line_error(capsys, [])
+    hrl0 = runs[("hrl-sac", 0)][0]
+    assert "--out DIR is required" in _one_line_error(capsys, [str(hrl0)])
+
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert f"{empty}: no config.json" in _one_line_error(capsys, [str(hrl0), str(empty), "--out", out])
+    assert "no such run folder" in _one_line_error(capsys, [str(tmp_path / "nope"), "--out", out])
+
+    (runs[("sac", 1)][0] / "eval_test.json").unlink()
+    err = _one_line_error(capsys, [str(hrl0), str(runs[("sac", 1)][0]), "--out", out])
+    assert "no eval_test.json" in err and "--evaluate" in err
+    err = _one_line_error(capsys, [str(hrl0), "--episodes", "20", "--out", out])
+    assert "has 10 episodes, not 20" in err
+
+    (runs[("sac", 0)][0] / "progress.csv").write_text("step,success_rate\n1000,zero\n")
+    assert "progress.csv: unreadable CSV" in _one_line_error(capsys, [str(runs[("sac", 0)][0]), "--out", out])
+    (runs[("sac", 2)][0] / "progress.csv").write_bytes(b"\xff\xfe\x00garbage")
+    assert "progress.csv: unreadable CSV" in _one_line_error(capsys, [str(runs[("sac", 2)][0]), "--out", out])
+
+    other = runs[("hrl-sac", 1)][0]
+    config = json.loads((other / "config.json").read_text())
+    config["flight"]["altitude_m"] = 80.0
+    (other / "config.json").write_text(json.dumps(config))
+    err = _one_line_error(capsys, [str(hrl0), str(other), "--out", out])
+    assert "runs disagree on flight settings" in err and "altitude_m 50.0 vs 80.0" in err
+
+    # --evaluate needs a checkpoint; these fakes have none
+    err = _one_line_error(capsys, [str(runs[("sac", 1)][0]), "--evaluate", "--out", out])
+    assert "cannot evaluate" in err and "no checkpoint" in err
+    assert not Path(out).exists()
