@@ -35,9 +35,9 @@ Instead of the inline fields, a scenario can be a reference:
   ``generator: {seed: 12345}`` is ``generate_scenario(12345)``. Both are reproducible.
 * ``dataset: {root: ../datasets/sar2, split: test, image: img_0042, seed: 0}`` is the scenario built from
   one labelled image of a YOLO-format dataset. ``root`` is relative to the folder of the mission file;
-  ``image`` is the image's file name, with or without its extension; ``seed`` (optional, 0) is passed as is
-  to ``scenario_from_item`` and becomes the scenario's seed (``YoloDataset.scenarios`` instead derives a
-  seed per image, so its scenario for the same image differs in the drawn conditions, current and datum).
+  ``image`` is the image's file name, with or without its extension; ``seed`` (optional, 0) is the dataset
+  seed of ``YoloDataset.scenarios(split, seed=seed)``, whose scenario for that image the mission reproduces
+  exactly (same drawn conditions, current and datum).
 
 Positions are metres north/east of home (local NED frame). Categories: person, boat, life_jacket, debris,
 floating_object, swimmer. Conditions: ``sea`` calm/moderate/rough, ``weather`` clear/cloudy/foggy/rainy,
@@ -492,7 +492,7 @@ def _from_dataset(value: Any, path: str, base_dir: Path) -> Scenario:
     image = _string(spec["image"], f"{path}.image")
     seed = _integer(spec.get("seed", 0), f"{path}.seed", minimum=0)
     try:
-        from missions.datasets import YoloDataset, scenario_from_item
+        from missions.datasets import YoloDataset, image_seed, scenario_from_item
     except ImportError as error:
         raise _Invalid(path, f"the dataset loader is not available ({error})") from None
     try:
@@ -504,10 +504,10 @@ def _from_dataset(value: Any, path: str, base_dir: Path) -> Scenario:
     except (OSError, ValueError, KeyError) as error:
         raise _Invalid(f"{path}.split", f"cannot list split {split!r}: {error}") from None
     by_name = {}
-    for item in items:
+    for index, item in enumerate(items):
         image_path = Path(item.image_path)
-        by_name.setdefault(image_path.name, item)
-        by_name.setdefault(image_path.stem, item)
+        by_name.setdefault(image_path.name, (index, item))
+        by_name.setdefault(image_path.stem, (index, item))
     if image not in by_name:
         stems = sorted({Path(item.image_path).stem for item in items})
         close = difflib.get_close_matches(image, stems, n=1, cutoff=0.6)
@@ -515,7 +515,10 @@ def _from_dataset(value: Any, path: str, base_dir: Path) -> Scenario:
         raise _Invalid(f"{path}.image", f"{image!r} not found in split {split!r} of {root} "
                                         f"({len(items)} images){suggestion}")
     try:
-        scenario = scenario_from_item(by_name[image], seed=seed)
+        index, item = by_name[image]
+        # The same per-image seed as YoloDataset.scenarios(split, seed=seed): the mission flies exactly the
+        # scenario an evaluation on that split uses for this image.
+        scenario = scenario_from_item(item, seed=image_seed(seed, split, index))
     except (OSError, ValueError) as error:  # e.g. an unreadable image (its size sets the area's height)
         raise _Invalid(f"{path}.image", f"cannot build a scenario from {image!r}: {error}") from None
     if scenario is None:
