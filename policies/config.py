@@ -112,8 +112,13 @@ class TrainConfig:
     """Meta entropy target = scale * log(4): high enough that the meta-policy never collapses."""
     meta_min_alpha: float = 1e-3
     """Floor on the meta temperature, a second guard against a deterministic meta-policy."""
+    intrinsic_reward: str = "progress"
+    """Low-level reward towards the goal point g: "distance" is the paper's -||s' - g|| / intrinsic_scale_m;
+    "progress" is (||s - g|| - ||s' - g||) / intrinsic_scale_m, the same signal as potential-based shaping.
+    With "distance" every step costs, so ending the episode early by leaving the area (-10 once) beats a long
+    flight to a far goal: a pilot run learned exactly that (episodes of 13 steps). See docs/paper-notes.md."""
     intrinsic_scale_m: float = 100.0
-    """The low-level reward is -||position - g|| / intrinsic_scale_m per step (metres -> order 1)."""
+    """Metres per unit of intrinsic reward."""
     intrinsic_goal_bonus: float = 1.0
     """Added to the intrinsic reward on the step the low level comes within reach of its sub-goal."""
     extrinsic_weight: float = 1.0
@@ -134,6 +139,9 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ("hrl-sac", "sac"):
             raise ValueError(f"TrainConfig.algo must be 'hrl-sac' or 'sac', got {self.algo!r}")
+        if self.intrinsic_reward not in ("progress", "distance"):
+            raise ValueError(f"TrainConfig.intrinsic_reward must be 'progress' or 'distance', "
+                             f"got {self.intrinsic_reward!r}")
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
                                 ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9)):

@@ -5,9 +5,10 @@ Per vector step (``num_envs`` environments at once):
 1. HRL-SAC only: every environment whose sub-goal has run K steps (or that starts an episode) gets a new goal
    from the meta-controller (uniformly random during warm-up); the environment grounds it to a point g.
 2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
-3. Transitions are stored raw in prioritised replay: the low level's with reward
-   ``-||position - g|| / intrinsic_scale_m`` (+ a bonus on reaching g, + ``extrinsic_weight`` x the environment
-   reward) for HRL-SAC, the environment reward for flat SAC; the meta-controller's, once its goal has run K
+3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
+   ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
+   ``TrainConfig.intrinsic_reward``) + a bonus on reaching g + ``extrinsic_weight`` x the environment reward for
+   HRL-SAC, the environment reward for flat SAC; the meta-controller's, once its goal has run K
    steps or the episode ended, with the K-step discounted extrinsic return and discount ``meta_gamma ** k``.
 4. After warm-up: ``updates_per_step`` low-level updates per environment step and one meta update per meta
    transition, with importance weights and new priorities from the TD errors.
@@ -136,6 +137,8 @@ class Trainer:
             actions = self.rng.uniform(ACTION_LOW, ACTION_HIGH, size=(cfg.num_envs, 4)).astype(np.float32)
         else:
             actions = self.low.act(self._norm(self.obs)).astype(np.float32)
+        core = self.env.core
+        distance_before = np.hypot(*(core.position - core.goal_point).T)
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
@@ -144,7 +147,8 @@ class Trainer:
         if self.hrl:
             distance = np.hypot(*(info["position"] - info["goal_point"]).T)
             reached = distance <= cfg.flight.reach_radius_m
-            low_reward = (-distance / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * reached
+            toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
+            low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * reached
                           + cfg.extrinsic_weight * reward)
             self.segment_reached |= reached
         else:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -73,6 +74,10 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
         print(f"training {config.algo} ({config.preset} preset) for {config.total_steps:,} steps with "
               f"{config.num_envs} environments, seed {config.seed}; run folder {run_dir}"
               + (f" (resumed at step {trainer.step:,})" if args.resume else ""), flush=True)
+    # Ctrl-C, and a SIGTERM from a scheduler or `kill`, stop at the next step with a checkpoint. (A job started
+    # in the background by a non-interactive shell ignores SIGINT; restore Python's handler for it.)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         path = trainer.run(progress=not args.quiet)
     except KeyboardInterrupt:
@@ -83,3 +88,7 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
     if not args.quiet:
         print(f"done: {trainer.step:,} steps, {trainer.episodes} episodes; checkpoint {path}")
     return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt

@@ -81,12 +81,16 @@ def test_meta_transitions_carry_k_step_discounted_returns(tmp_path):
     assert trainer.needs_goal.all()
 
 
-def test_low_level_reward_is_the_negative_distance_to_the_goal_point(tmp_path):
-    config = small_config("hrl-sac", intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0, extrinsic_weight=0.0)
+@pytest.mark.parametrize("kind", ["progress", "distance"])
+def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind):
+    config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
+                          extrinsic_weight=0.0)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
     def spy(actions):
+        core = trainer.env.core
+        captured["before"] = np.hypot(*(core.position - core.goal_point).T)
         result = real_step(actions)
         captured["info"] = result[4]
         return result
@@ -95,8 +99,10 @@ def test_low_level_reward_is_the_negative_distance_to_the_goal_point(tmp_path):
     trainer.collect()
     info = captured["info"]
     distance = np.hypot(*(info["position"] - info["goal_point"]).T)
+    toward = captured["before"] - distance if kind == "progress" else -distance
+    assert kind == "distance" or np.all(np.abs(toward) < 20.0)  # one step of flight, not a distance
     np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2],
-                               -distance / 100.0 + (distance <= config.flight.reach_radius_m), rtol=1e-5)
+                               toward / 100.0 + (distance <= config.flight.reach_radius_m), rtol=1e-5, atol=1e-7)
 
 
 def test_flat_sac_learns_from_the_environment_reward(tmp_path):
@@ -151,3 +157,27 @@ def test_train_and_evaluate_commands(tmp_path):
     missing = subprocess.run([*base, "evaluate", str(tmp_path / "nothing")], capture_output=True, text=True,
                              timeout=120)
     assert missing.returncode == 2 and "no checkpoint" in missing.stderr
+
+
+def test_a_terminated_training_saves_its_checkpoint_and_resumes(tmp_path):
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    base = [sys.executable, "-m", "hrlsac_cli", "train"]
+    process = subprocess.Popen([*base, "--algo", "sac", "--steps", "1000000", "--out", str(run), "--quiet",
+                                "--set", "warmup_steps=100", "--set", "num_envs=2", "--set", "log_every=100"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (run / "progress.csv").exists():
+        time.sleep(0.2)
+    while time.monotonic() < deadline and len((run / "progress.csv").read_text().splitlines()) < 3:
+        time.sleep(0.2)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "checkpoint saved" in stderr and "--resume" in stderr
+    state = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    assert state["step"] >= 200
+    resumed = Trainer(TrainConfig.from_dict(json.loads((run / "config.json").read_text())), run, resume=True)
+    assert resumed.step == state["step"]
