@@ -36,6 +36,7 @@ REWARD_ENERGY = -0.01
 REWARD_TARGET = 100.0
 REWARD_COLLISION = -50.0
 REWARD_BOUNDARY = -10.0
+ENERGY_COMPONENTS = slice(0, 4)  # the action components the energy term -0.01 ||a||^2 counts (all four)
 
 ACTION_LOW = np.array([-1.0, -1.0, 0.0, 0.0], dtype=np.float32)
 ACTION_HIGH = np.array([1.0, 1.0, 1.0, 1.0], dtype=np.float32)
@@ -280,7 +281,8 @@ class SarSearchBatch:
         success = distance <= flight.reach_radius_m
         collision = search.inside_obstacle(position, scen.obstacles, scen.obstacle_valid) & ~success
         out_of_bounds = search.outside_fence(position, scen.fence) & ~success
-        reward = (REWARD_STEP + REWARD_ENERGY * np.einsum("ij,ij->i", a, a) + REWARD_TARGET * success
+        energy = a[:, ENERGY_COMPONENTS]
+        reward = (REWARD_STEP + REWARD_ENERGY * np.einsum("ij,ij->i", energy, energy) + REWARD_TARGET * success
                   + REWARD_COLLISION * collision + REWARD_BOUNDARY * out_of_bounds)
         self.episode_return += reward
         terminated = success | collision | out_of_bounds
