@@ -123,6 +123,8 @@ class TrainConfig:
     """Added to the intrinsic reward on the step the low level comes within reach of its sub-goal."""
     extrinsic_weight: float = 1.0
     """Share of the extrinsic reward added to the low-level reward (0 = purely intrinsic, as the paper)."""
+    coverage_bonus: float = 0.0
+    """Low-level reward per newly covered grid cell (0 = none): something that pays for searching on the way."""
 
     # --- bookkeeping
     checkpoint_every: int = 20_000

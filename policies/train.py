@@ -139,6 +139,7 @@ class Trainer:
             actions = self.low.act(self._norm(self.obs)).astype(np.float32)
         core = self.env.core
         distance_before = np.hypot(*(core.position - core.goal_point).T)
+        covered_before = core.covered_cells.copy()
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
@@ -148,8 +149,9 @@ class Trainer:
             distance = np.hypot(*(info["position"] - info["goal_point"]).T)
             reached = distance <= cfg.flight.reach_radius_m
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
+            newly_covered = info["coverage_ratio"] * core.coverage[0].size - covered_before
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * reached
-                          + cfg.extrinsic_weight * reward)
+                          + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * reward)
             self.segment_reached |= reached
         else:
             low_reward = reward

@@ -81,10 +81,10 @@ def test_meta_transitions_carry_k_step_discounted_returns(tmp_path):
     assert trainer.needs_goal.all()
 
 
-@pytest.mark.parametrize("kind", ["progress", "distance"])
-def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind):
+@pytest.mark.parametrize("kind, coverage_bonus", [("progress", 0.0), ("distance", 0.0), ("progress", 0.5)])
+def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
-                          extrinsic_weight=0.0)
+                          extrinsic_weight=0.0, coverage_bonus=coverage_bonus, warmup_steps=1_000)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
@@ -101,8 +101,9 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind):
     distance = np.hypot(*(info["position"] - info["goal_point"]).T)
     toward = captured["before"] - distance if kind == "progress" else -distance
     assert kind == "distance" or np.all(np.abs(toward) < 20.0)  # one step of flight, not a distance
-    np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2],
-                               toward / 100.0 + (distance <= config.flight.reach_radius_m), rtol=1e-5, atol=1e-7)
+    newly_covered = info["coverage_ratio"] * 1024  # the grid was empty before the first step
+    expected = toward / 100.0 + (distance <= config.flight.reach_radius_m) + coverage_bonus * newly_covered
+    np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], expected, rtol=1e-5, atol=1e-7)
 
 
 def test_flat_sac_learns_from_the_environment_reward(tmp_path):
