@@ -33,6 +33,7 @@ import torch
 
 from policies.config import TrainConfig
 from policies.networks import (
+    CheckpointedAgent,
     ActionScaler,
     PrivateTorchRNG,
     SquashedGaussianActor,
@@ -45,7 +46,7 @@ from policies.networks import (
 METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
 
 
-class SAC:
+class SAC(CheckpointedAgent):
     """Continuous SAC with twin critics, target critics and automatic entropy tuning.
 
     Args:
@@ -215,32 +216,3 @@ class SAC:
         w = torch.ones(b) if weights is None else as_float_tensor("weights", weights, (b,))
         return obs, action, reward, next_obs, done, discount, w
 
-    # ------------------------------------------------------------------------------------------------ checkpoints
-    def state_dict(self) -> dict:
-        """Everything a resumed run needs (like ``nn.Module.state_dict``, tensors are shared: ``torch.save`` or
-        deep-copy it for a snapshot)."""
-        return {
-            "actor": self.actor.state_dict(),
-            "critic": self.critic.state_dict(),
-            "critic_target": self.critic_target.state_dict(),
-            "actor_optim": self.actor_optim.state_dict(),
-            "critic_optim": self.critic_optim.state_dict(),
-            "alpha_optim": self.alpha_optim.state_dict(),
-            "log_alpha": self.log_alpha.detach().clone(),
-            "generator": self.generator.get_state(),
-            "dropout_rng": self.dropout_rng.state.clone(),
-            "num_updates": self.num_updates,
-        }
-
-    def load_state_dict(self, state: dict) -> None:
-        self.actor.load_state_dict(state["actor"])
-        self.critic.load_state_dict(state["critic"])
-        self.critic_target.load_state_dict(state["critic_target"])
-        self.actor_optim.load_state_dict(state["actor_optim"])
-        self.critic_optim.load_state_dict(state["critic_optim"])
-        self.alpha_optim.load_state_dict(state["alpha_optim"])
-        with torch.no_grad():
-            self.log_alpha.copy_(state["log_alpha"])  # in place: alpha_optim holds this very tensor
-        self.generator.set_state(state["generator"])
-        self.dropout_rng.state = state["dropout_rng"].clone()
-        self.num_updates = int(state["num_updates"])
