@@ -17,6 +17,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("policies.evaluate_cli", "the paper's metrics of a trained run on a scenario split"),
     "dataset": ("missions.dataset_cli", "make the synthetic SAR dataset or inspect a YOLO dataset"),
     "compare": ("policies.compare_cli", "compare trained runs and the scripted baselines: markdown report and figures"),
+    "export": ("policies.export_cli", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
+    "policy": ("autonomy.policy_cli", "inspect an exported policy artifact (policy info) with the on-board runtime"),
 }
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"

@@ -10,8 +10,13 @@ N searches; positions are (north, east) metres in the local NED frame of home.
   uncovered. Falls back to the datum when the whole area is covered.
 * SearchSpecificLocation: the uncovered grid cell with the highest prior probability of holding the victim:
   a Gaussian around the datum with the datum's uncertainty, times (1 - coverage). Falls back to the datum.
-* TrackObject: the last detection of the victim; the datum before anything was detected.
+* TrackObject: the best estimate of where the victim is now: its last detection, or before any detection the
+  SearchSpecificLocation point (the most probable place not yet searched).
 * ReturnToBase: home (the start point).
+
+Callers pass the datum drifted to the current time (``ScenarioBatch.datum_at``), and re-ground a goal when the
+drone reaches its point before the meta-controller's next decision (``SarSearchBatch.step``): the goal keeps its
+meaning ("search the most probable unsearched place") while its point moves on.
 """
 from __future__ import annotations
 
@@ -71,13 +76,14 @@ def ground_goals(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, cover
                  home: np.ndarray) -> np.ndarray:
     """(N, 2) goal points for goal indices (N,); coverage is the (N, 32, 32) grid. Entries with no goal get the datum."""
     point = datum.copy()
-    for goal_id, pick in ((EXPLORE, goal == EXPLORE), (SEARCH_LOCATION, goal == SEARCH_LOCATION)):
-        if pick.any():
-            if goal_id == EXPLORE:
-                point[pick] = explore_point(agent_ne[pick], area[pick], coverage[pick], datum[pick])
-            else:
-                point[pick] = search_location_point(area[pick], coverage[pick], datum[pick], datum_sigma[pick])
+    explore = goal == EXPLORE
+    if explore.any():
+        point[explore] = explore_point(agent_ne[explore], area[explore], coverage[explore], datum[explore])
     track = (goal == TRACK_OBJECT) & has_detection
+    search_here = (goal == SEARCH_LOCATION) | ((goal == TRACK_OBJECT) & ~has_detection)
+    if search_here.any():
+        point[search_here] = search_location_point(area[search_here], coverage[search_here], datum[search_here],
+                                                   datum_sigma[search_here])
     point[track] = last_detection[track]
     home_goal = goal == RETURN_TO_BASE
     point[home_goal] = home[home_goal]

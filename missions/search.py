@@ -133,6 +133,15 @@ class ScenarioBatch:
     """(N, T, 2) float64 m/s: current + leeway * wind, per target (0 for padding)."""
     seeds: np.ndarray
     """(N,) int64: Scenario.seed, the seed of the randomness while the scenario is flown."""
+
+    def datum_at(self, time_s: np.ndarray) -> np.ndarray:
+        """(N, 2) the datum drifted to ``time_s`` (N,) seconds into the search.
+
+        A SAR planner moves the datum with the forecast total water current plus the leeway of the reported
+        object (IAMSAR's datum computation); here the forecast is the scenario's own current and wind, and the
+        reported object is the primary target's category. Nothing else about the victim is used."""
+        drift = self.drift_velocity[np.arange(len(self.datum)), self.primary_index]
+        return self.datum + drift * np.reshape(time_s, (-1, 1))
     target_size_m: np.ndarray = field(init=False)
     """(N, T) float64, derived: OBJECT_SIZE_M of each target (0 for padding)."""
     detection_factor: np.ndarray = field(init=False)

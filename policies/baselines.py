@@ -9,7 +9,8 @@ and their own detections (the last detection of the victim), never the hidden vi
 * ``parallel_track``: IAMSAR parallel track ("lawnmower") search of the box of +-2.5 sigma around the datum,
   east-west tracks S apart, starting from the corner nearest to the drone.
 
-Both pattern searches fly at full speed with the sensor on and the camera at its widest, and once the victim
+Both patterns drift with the datum (the forecast current plus the reported object's leeway, as IAMSAR plans
+a search of a drifting object) and fly at full speed with the sensor on and the camera at its widest; once the victim
 has been detected fly straight to the last detection. Like a real crew they know the charted hazards and the
 search-area boundary: waypoints are kept 20 m inside the geofence, and a leg that would enter a danger zone
 (plus a 15 m margin) is flown around it along its edge.
@@ -58,10 +59,11 @@ class ScriptedSearch:
             self.count[i], self.next[i] = len(points), 0
         position = core.position
         index = np.arange(core.n)
-        goal = self.waypoints[index, np.minimum(self.next, self.count - 1)]
+        drift = core.scen.datum_at(core.time_s) - core.scen.datum  # the pattern moves with the drifting datum
+        goal = self.waypoints[index, np.minimum(self.next, self.count - 1)] + drift
         arrived = np.hypot(*(goal - position).T) < 0.5 * core.flight.max_speed_mps * core.flight.step_period_s + 1.0
         self.next += arrived & (self.next < self.count - 1)
-        goal = self.waypoints[index, self.next]
+        goal = self.waypoints[index, self.next] + drift
         goal = np.where(core.has_detection[:, None], core.last_detection, goal)
         fence = core.scen.fence
         goal[:, 0] = np.clip(goal[:, 0], fence[:, 0] + FENCE_MARGIN_M, fence[:, 1] - FENCE_MARGIN_M)

@@ -17,6 +17,16 @@ from policies.sac import SAC
 from policies.train import CHECKPOINT
 
 
+def checkpoint_file(path: Path | str) -> Path:
+    """The checkpoint file of a run folder (its checkpoint.pt) or the file itself; it must exist."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / CHECKPOINT
+    if not path.exists():
+        raise FileNotFoundError(f"no checkpoint at {path}")
+    return path
+
+
 @dataclass
 class CheckpointPolicy:
     """Normaliser + low-level (or flat) actor + meta-controller (HRL-SAC) of one checkpoint."""
@@ -31,22 +41,28 @@ class CheckpointPolicy:
     @classmethod
     def load(cls, path: Path | str) -> "CheckpointPolicy":
         """From a checkpoint file or a run folder (its checkpoint.pt)."""
-        path = Path(path)
-        if path.is_dir():
-            path = path / CHECKPOINT
-        if not path.exists():
-            raise FileNotFoundError(f"no checkpoint at {path}")
-        state = torch.load(path, map_location="cpu", weights_only=False)
-        config = TrainConfig.from_dict(state["config"])
-        normalizer = RunningMeanStd((OBS_DIM,))
-        normalizer.load_state_dict(state["normalizer"])
+        path = checkpoint_file(path)
+        return cls.from_state(torch.load(path, map_location="cpu", weights_only=False), path)
+
+    @classmethod
+    def from_state(cls, state: dict, path: Path) -> "CheckpointPolicy":
+        """From a checkpoint already read with ``torch.load`` (``path`` is where it came from)."""
+        policy = cls.untrained(TrainConfig.from_dict(state["config"]))
+        policy.normalizer.load_state_dict(state["normalizer"])
+        policy.low.load_state_dict(state["low"])
+        if policy.meta is not None:
+            policy.meta.load_state_dict(state["meta"])
+        policy.step, policy.path = int(state["step"]), path
+        return policy
+
+    @classmethod
+    def untrained(cls, config: TrainConfig) -> "CheckpointPolicy":
+        """The networks a run with ``config`` starts from and an identity normaliser (benchmarks, tests)."""
         low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed)
-        low.load_state_dict(state["low"])
         meta = None
         if config.algo == "hrl-sac":
             meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), config, seed=config.seed + 1)
-            meta.load_state_dict(state["meta"])
-        return cls(config, normalizer, low, meta, int(state["step"]), path)
+        return cls(config, RunningMeanStd((OBS_DIM,)), low, meta, 0, Path("untrained"))
 
     @property
     def hierarchical(self) -> bool:

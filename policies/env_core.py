@@ -16,6 +16,8 @@ One step is one policy decision (``FlightSettings.step_period_s``, 1 s by defaul
 3. reward (the paper's table): -0.1 per step, -0.01 * ||a||^2, +100 on reaching the victim, -50 on entering a
    danger zone, -10 on leaving the geofence. Reaching, collision and leaving end the episode (terminated);
    the step limit truncates it.
+4. HRL-SAC (goal-conditioned mode): a goal whose point the drone reached is grounded again from the new search
+   state (``missions.goals``), so the low level always has somewhere useful to fly until the next meta decision.
 """
 from __future__ import annotations
 
@@ -213,12 +215,17 @@ class SarSearchBatch:
         mask = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         if np.any((goals[mask] < 0) | (goals[mask] >= len(goal_logic.GOAL_NAMES))):
             raise ValueError(f"goal indices must be in [0, {len(goal_logic.GOAL_NAMES) - 1}], got {goals[mask]}")
-        scen = self.scen
         self.goal[mask] = goals[mask]
-        self.goal_point[mask] = goal_logic.ground_goals(
-            goals[mask], self.position[mask], scen.area[mask], self.coverage[mask], scen.datum[mask],
-            scen.datum_sigma[mask], self.last_detection[mask], self.has_detection[mask], scen.start[mask])
+        self._ground(mask)
         self.observe(np.flatnonzero(mask))
+
+    def _ground(self, mask: np.ndarray) -> None:
+        """Turn the goals of the ``mask`` rows into points from the search state now."""
+        scen = self.scen
+        self.goal_point[mask] = goal_logic.ground_goals(
+            self.goal[mask], self.position[mask], scen.area[mask], self.coverage[mask],
+            scen.datum_at(self.time_s)[mask], scen.datum_sigma[mask], self.last_detection[mask],
+            self.has_detection[mask], scen.start[mask])
 
     # ------------------------------------------------------------------ observing and stepping
     def target_position(self) -> np.ndarray:
@@ -276,6 +283,8 @@ class SarSearchBatch:
         first = victim_seen & ~self.has_detection
         self.first_detection_step[first] = self.steps[first]
         self.has_detection |= victim_seen
+        not_seen = ~self.has_detection  # until the victim is seen, its best estimate is the drifting datum
+        self.last_detection[not_seen] = scen.datum_at(self.time_s)[not_seen]
 
         distance = search.distance_to_primary(position, self.targets, primary)
         success = distance <= flight.reach_radius_m
@@ -287,11 +296,17 @@ class SarSearchBatch:
         self.episode_return += reward
         terminated = success | collision | out_of_bounds
         truncated = (self.steps >= flight.max_steps) & ~terminated
+        # A goal reached before the meta-controller's next decision is grounded again (its next point); the
+        # info reports the point this step flew towards.
+        step_goal_point = self.goal_point.copy()
+        goal_reached = (self.goal != NO_GOAL) & (np.hypot(*(position - step_goal_point).T) <= flight.reach_radius_m)
+        if goal_reached.any():
+            self._ground(goal_reached)
         # Views of the live arrays: valid until the next step (the wrappers copy what they hand out).
         info = {"success": success, "collision": collision, "out_of_bounds": out_of_bounds,
                 "distance_to_victim_m": distance, "coverage_ratio": self.covered_cells / self.coverage[0].size,
                 "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,
-                "position": position, "goal_point": self.goal_point, "path_length_m": self.path_length_m,
+                "position": position, "goal_point": step_goal_point, "goal_reached": goal_reached, "path_length_m": self.path_length_m,
                 "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 

@@ -3,6 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
+VARIANCE_FLOOR = 1e-8
+"""Added to the variance before the square root, so that a constant feature divides by 1e-4, not 0."""
+
 
 class RunningMeanStd:
     """Running mean and variance (Chan et al. parallel update) of observations, for standardising inputs.
@@ -54,8 +57,12 @@ class RunningMeanStd:
         ``x`` may hold only the first D features (the meta-controller sees a prefix of the observation)."""
         x = np.asarray(x, dtype=np.float64)
         d = x.shape[-1]
-        standardised = (x - self.mean[..., :d]) / np.sqrt(self.var[..., :d] + 1e-8)
+        standardised = (x - self.mean[..., :d]) / self.std()[..., :d]
         return np.clip(standardised, -self.clip, self.clip).astype(np.float32)
+
+    def std(self) -> np.ndarray:
+        """``sqrt(var + 1e-8)``, the divisor of :meth:`normalize` (float64; the export freezes it as is)."""
+        return np.sqrt(self.var + VARIANCE_FLOOR)
 
     def state_dict(self) -> dict:
         return {"mean": self.mean.copy(), "var": self.var.copy(), "count": self.count,

@@ -7,8 +7,8 @@ Per vector step (``num_envs`` environments at once):
 2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
 3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
-   ``TrainConfig.intrinsic_reward``) + a bonus on reaching g + ``extrinsic_weight`` x the environment reward for
-   HRL-SAC, the environment reward for flat SAC; the meta-controller's, once its goal has run K
+   ``TrainConfig.intrinsic_reward``) + a bonus on reaching g + ``extrinsic_weight`` x the environment reward without its constant
+   per-step cost for HRL-SAC, the environment reward for flat SAC; the meta-controller's, once its goal has run K
    steps or the episode ended, with the K-step discounted extrinsic return and discount ``meta_gamma ** k``.
 4. After warm-up: ``updates_per_step`` low-level updates per environment step and one meta update per meta
    transition, with importance weights and new priorities from the TD errors.
@@ -38,7 +38,7 @@ from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
-from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
+from policies.env_core import ACTION_HIGH, ACTION_LOW, REWARD_STEP, SarSearchConfig
 from policies.normalizer import RunningMeanStd
 from policies.replay import PrioritizedReplayBuffer, linear_beta
 from policies.sac import SAC
@@ -146,12 +146,12 @@ class Trainer:
         for i in np.flatnonzero(done):
             real_next[i] = info["final_obs"][i]
         if self.hrl:
-            distance = np.hypot(*(info["position"] - info["goal_point"]).T)
-            reached = distance <= cfg.flight.reach_radius_m
+            distance = np.hypot(*(info["position"] - info["goal_point"]).T)  # the point this step flew to
+            reached = info["goal_reached"]  # (the environment has already grounded those goals again)
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
             newly_covered = info["coverage_ratio"] * core.coverage[0].size - covered_before
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * reached
-                          + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * reward)
+                          + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
         else:
             low_reward = reward

@@ -2,6 +2,7 @@
 environment, seeding, and the single and vectorised forms agreeing."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import gymnasium
@@ -100,12 +101,44 @@ def test_goal_one_hot_and_goal_point_in_goal_conditioned_mode():
     obs = env.set_goal(3)  # ReturnToBase: home
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 0, 1])
     np.testing.assert_allclose(field(obs, "target_position"), [50 / 1000, 0.5])
-    obs = env.set_goal(TRACK_OBJECT)  # nothing detected yet: the datum
+    obs = env.set_goal(TRACK_OBJECT)  # nothing detected yet: the centre of the datum's grid cell (1000 m / 32)
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 1, 0])
-    np.testing.assert_allclose(field(obs, "target_position"), [0.6, 0.58])
+    np.testing.assert_allclose(field(obs, "target_position"), [19.5 / 32, 18.5 / 32])
     np.testing.assert_array_equal(env.meta_observation, obs[:272])
     with pytest.raises(ValueError, match=r"goal indices must be in \[0, 3\]"):
         env.set_goal(4)
+
+
+def test_target_follows_the_datum_drifted_by_current_and_leeway_until_detection():
+    # 0.5 m/s current to the east, no wind: after 10 steps of 1 s the datum has moved 5 m east.
+    drifting = dataclasses.replace(scenario(victim=(900.0, 400.0)), current_east_mps=0.5)
+    env = env_for(drifting)
+    env.reset(seed=0)
+    for _ in range(10):
+        obs, *_ = env.step(HOVER)
+    np.testing.assert_allclose(field(obs, "target_position"), [600 / 1000, 585 / 1000], atol=1e-6)
+
+
+def test_a_reached_goal_is_grounded_again_before_the_next_decision():
+    # SearchSpecificLocation from a start one cell south of the datum's cell: reached in the first steps,
+    # then the next most probable unsearched cell becomes the point, without a new meta decision.
+    env = env_for(scenario(victim=(900.0, 400.0), datum=(560.0, 90.0), start=(530.0, 90.0)), goal_conditioned=True)
+    env.reset(seed=0)
+    env.set_goal(1)
+    first_point = env.core.goal_point[0].copy()
+    for _ in range(10):
+        offset = env.core.goal_point[0] - env.core.position[0]
+        action = np.concatenate([offset / max(np.hypot(*offset), 10.0), [1.0, 0.0]]).astype(np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        if info["goal_reached"]:
+            break
+    assert info["goal_reached"] and np.hypot(*(info["position"] - first_point)) <= 15.0
+    np.testing.assert_allclose(info["goal_point"], first_point)  # the point this step flew to
+    assert np.hypot(*(env.core.goal_point[0] - first_point)) > 15.0  # the next one, already in the observation
+    assert env.core.goal[0] == 1 and field(obs, "goal")[1] == 1
+    np.testing.assert_allclose(field(obs, "target_position"),
+                               [(env.core.goal_point[0, 0] + 50) / 1000, (env.core.goal_point[0, 1] + 500) / 1000],
+                               atol=1e-6)
 
 
 def test_target_position_never_leaks_the_victim_until_it_is_detected():

@@ -23,9 +23,15 @@ def test_return_to_base_is_home():
     np.testing.assert_allclose(ground(RETURN_TO_BASE, agent=(700.0, 300.0), home=(0.0, 0.0)), (0.0, 0.0))
 
 
-def test_track_object_is_the_last_detection_or_the_datum():
-    np.testing.assert_allclose(ground(TRACK_OBJECT), (600.0, 100.0))
-    np.testing.assert_allclose(ground(TRACK_OBJECT, detection=(640.0, 80.0)), (640.0, 80.0))
+def test_track_object_is_the_last_detection_or_else_the_most_probable_unsearched_place():
+    datum = cell_centre(20, 19)
+    coverage = np.zeros((32, 32), np.float32)
+    coverage[20, 19] = 1.0  # the datum's own cell has been searched
+    before = ground(TRACK_OBJECT, coverage=coverage, datum=datum)
+    np.testing.assert_allclose(before, ground(SEARCH_LOCATION, coverage=coverage, datum=datum))
+    assert np.hypot(*(np.array(before) - datum)) == np.float64(31.25)  # a neighbouring cell
+    np.testing.assert_allclose(ground(TRACK_OBJECT, coverage=coverage, datum=datum, detection=(640.0, 80.0)),
+                               (640.0, 80.0))
 
 
 def test_search_location_is_the_most_probable_uncovered_cell_near_the_datum():

@@ -1,0 +1,193 @@
+"""The on-board policy runtime: load an exported artifact, check it, and run its two entry points.
+
+A companion computer has the artifact and this package, not the training code: nothing here imports
+``policies`` (or gymnasium); tests/test_export.py loads and runs an artifact with ``policies`` hidden.
+
+Before any weight is loaded, :func:`load_policy` checks the file (a zip archive, complete, every member's
+CRC-32 intact) and its manifest (a format version this runtime knows, the same observation layout as
+``autonomy.observation``, the same goals as ``missions.goals``). Whatever is wrong is raised as one
+:class:`PolicyArtifactError` whose message is one line naming the file and the problem: flying a policy that
+reads a different observation than the one it is given would fail silently, so a mismatch is refused.
+
+The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step (``goal_due(step)``) first
+``select_goal(meta_obs)``, then the runner grounds the goal to a point (``missions.goals``), rebuilds the
+observation and acts on it. Both are deterministic (the mode of each policy).
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import zipfile
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
+from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
+from autonomy.torch_compat import pt2_archive, torchscript_calls
+
+ZIP_MAGIC = b"PK\x03\x04"
+ZIP_END = b"PK\x05\x06"
+# Names of the two programs in a torch-export artifact (a PT2 archive). "model" is the name plain
+# torch.export.load reads, so that call alone gives the every-step program.
+ACT_PROGRAM = "model"
+GOAL_PROGRAM = "select_goal"
+
+Program = Callable[[torch.Tensor], torch.Tensor]
+
+
+class PolicyArtifactError(ValueError):
+    """A policy artifact that cannot be flown; the message is one line: the file, then the problem."""
+
+
+@dataclass
+class Policy:
+    """A loaded, checked artifact: ``act`` every step, ``select_goal`` when ``goal_due``."""
+
+    manifest: PolicyManifest
+    path: Path
+    sha256: str
+    """Of the artifact file: names exactly what was flown (mission reports, flight logs)."""
+    _act: Program
+    _select_goal: Program
+
+    @property
+    def hierarchical(self) -> bool:
+        return self.manifest.hierarchical
+
+    @property
+    def subgoal_interval(self) -> int | None:
+        """K: steps between goal decisions (None for a flat policy)."""
+        return self.manifest.subgoal_interval
+
+    def goal_due(self, step: int) -> bool:
+        """Whether the meta-controller decides at this step of the mission (steps 0, K, 2K, ...)."""
+        return self.hierarchical and step % self.manifest.subgoal_interval == 0
+
+    def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
+        """(N, 272) or (272,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""
+        return self._run(self._select_goal, meta_obs, META_OBS_DIM)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """(N, 276) or (276,) raw observations -> actions (N, 4) or (4,), float32, in the action ranges."""
+        return self._run(self._act, obs, OBS_DIM)
+
+    @staticmethod
+    def _run(program: Program, values: np.ndarray, width: int) -> np.ndarray:
+        # float32 is what the observation builder makes and what the programs take.
+        batch = np.ascontiguousarray(values, dtype=np.float32)
+        single = batch.ndim == 1
+        if single:
+            batch = batch[None, :]
+        if batch.ndim != 2 or batch.shape[1] != width:
+            raise ValueError(f"expected observations of shape (N, {width}) or ({width},), got {np.shape(values)}")
+        with torch.inference_mode():
+            out = program(torch.from_numpy(batch)).numpy()
+        return out[0] if single else out
+
+
+def load_policy(path: Path | str) -> Policy:
+    """Read, check and load an artifact written by ``hrlsac export``; raises :class:`PolicyArtifactError`."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise PolicyArtifactError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise PolicyArtifactError(f"{path}: cannot read the file ({exc.strerror})") from None
+    manifest = read_manifest(data, str(path))
+    check_compatible(manifest, str(path))
+    try:
+        act, select_goal = _LOADERS[manifest.format](data)
+    except Exception as exc:  # torch raises anything from RuntimeError to pickle errors for a bad program
+        raise PolicyArtifactError(f"{path}: the {manifest.format} program does not load "
+                                  f"({one_line(exc)})") from None
+    policy = Policy(manifest, path, hashlib.sha256(data).hexdigest(), act, select_goal)
+    _self_test(policy, str(path))
+    return policy
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as "Type: first line of its message" (torch's messages run over many lines)."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
+def read_manifest(data: bytes, name: str) -> PolicyManifest:
+    """The manifest of an artifact's bytes, after checking that the archive is complete and intact."""
+    if not data.startswith(ZIP_MAGIC):
+        raise PolicyArtifactError(f"{name}: not a policy artifact (not a zip archive; expected a file written "
+                                  "by 'hrlsac export')")
+    try:
+        # torch writes the end record last, without a comment. Where it is not last, zipfile would search back
+        # and may find the end record of an archive nested inside (a PT2 archive holds torch.save files).
+        if data[-22:-18] != ZIP_END:
+            raise zipfile.BadZipFile("no end record at the end")
+        archive = zipfile.ZipFile(io.BytesIO(data))
+    except zipfile.BadZipFile:
+        raise PolicyArtifactError(f"{name}: truncated or damaged file (the zip archive has no valid end "
+                                  "record; copy the artifact again)") from None
+    members = [m for m in archive.namelist() if m.split("/")[-2:] == ["extra", MANIFEST_FILE]]
+    if len(members) != 1:
+        raise PolicyArtifactError(f"{name}: not a policy artifact (no {MANIFEST_FILE} inside; a plain "
+                                  "TorchScript or torch.export file?)")
+    try:
+        damaged = archive.testzip()  # reads every member and checks its CRC-32
+    except (zlib.error, EOFError, OSError) as exc:
+        raise PolicyArtifactError(f"{name}: corrupt file ({exc}; copy the artifact again)") from None
+    if damaged is not None:
+        raise PolicyArtifactError(f"{name}: corrupt file (checksum mismatch in {damaged}; copy the artifact "
+                                  "again)")
+    try:
+        return PolicyManifest.from_json(archive.read(members[0]))
+    except (ValueError, TypeError) as exc:
+        raise PolicyArtifactError(f"{name}: {exc}") from None
+
+
+def check_compatible(manifest: PolicyManifest, name: str) -> None:
+    """Refuse an artifact trained on another observation layout or with other goals than this runtime's."""
+    try:
+        difference = manifest.observation.difference(ObservationSpec.current())
+    except (KeyError, TypeError):
+        difference = "the artifact's field list is malformed"
+    if difference is not None:
+        raise PolicyArtifactError(f"{name}: observation layout of the artifact does not match this runtime's "
+                                  f"({difference}); export the policy again or use a matching runtime")
+    names = tuple(goal.name for goal in manifest.goals)
+    if manifest.hierarchical and names != GOAL_NAMES:
+        raise PolicyArtifactError(f"{name}: goals of the artifact {names} do not match this runtime's "
+                                  f"{GOAL_NAMES}")
+    if len(manifest.action.names) != 4:
+        raise PolicyArtifactError(f"{name}: the artifact has {len(manifest.action.names)} actions, this "
+                                  "runtime flies 4")
+
+
+def _load_torchscript(data: bytes) -> tuple[Program, Program]:
+    with torchscript_calls():
+        module = torch.jit.load(io.BytesIO(data), map_location="cpu")
+    return module.act, module.select_goal
+
+
+def _load_torch_export(data: bytes) -> tuple[Program, Program]:
+    programs = pt2_archive().load_pt2(io.BytesIO(data)).exported_programs
+    return programs[ACT_PROGRAM].module(), programs[GOAL_PROGRAM].module()
+
+
+_LOADERS = {"torchscript": _load_torchscript, "torch-export": _load_torch_export}
+
+
+def _self_test(policy: Policy, name: str) -> None:
+    """One call of each entry point on a zero observation: the programs must answer in the declared shapes."""
+    try:
+        action = policy.act(np.zeros((1, OBS_DIM), dtype=np.float32))
+        goal = policy.select_goal(np.zeros((1, META_OBS_DIM), dtype=np.float32))
+    except Exception as exc:  # whatever the program raises, the artifact cannot be flown
+        raise PolicyArtifactError(f"{name}: the program fails on a zero observation ({one_line(exc)})") from None
+    if action.shape != (1, 4) or action.dtype != np.float32:
+        raise PolicyArtifactError(f"{name}: act returned {action.dtype} {action.shape}, expected float32 (1, 4)")
+    if goal.shape != (1,) or goal.dtype != np.int64:
+        raise PolicyArtifactError(f"{name}: select_goal returned {goal.dtype} {goal.shape}, expected int64 (1,)")

@@ -1,0 +1,190 @@
+"""The manifest of an exported policy: what a companion computer must know to fly it, inside the artifact.
+
+A policy file is only safe to fly if the runtime feeds it the observation it was trained on and reads its
+actions the way it was trained to emit them. The manifest carries that contract (observation layout, action
+spec, goals and K) beside the provenance (training config, evaluation metrics, source checkpoint hash, torch
+version, time of export), as JSON inside the artifact (see docs/export.md). The exporter
+(``policies.export``) writes it; the runtime (``autonomy.policy``) reads and checks it before loading weights.
+
+``FORMAT_VERSION`` counts incompatible changes of the artifact (the programs' interface or the manifest's
+fields); a runtime refuses versions it does not know. Adding a manifest field is not such a change: readers
+ignore fields they do not know.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from autonomy.observation import META_OBS_DIM, OBS_DIM, OBSERVATION_LAYOUT_VERSION, layout_description
+
+FORMAT_VERSION = 1
+FORMATS = ("torchscript", "torch-export")
+MANIFEST_FILE = "manifest.json"
+NOT_EVALUATED = "not evaluated"
+
+
+@dataclass(frozen=True)
+class ObservationSpec:
+    """The observation layout the policy was trained on (``autonomy.observation``)."""
+
+    layout_version: int
+    dim: int
+    meta_dim: int
+    fields: tuple[dict, ...]
+    """One dict per field: name, offset, size, description."""
+
+    @classmethod
+    def current(cls) -> "ObservationSpec":
+        """The layout this code builds."""
+        return cls(OBSERVATION_LAYOUT_VERSION, OBS_DIM, META_OBS_DIM, tuple(layout_description()))
+
+    def difference(self, other: "ObservationSpec") -> str | None:
+        """None when both describe the same vector (descriptions may differ), else what differs first."""
+        for name in ("layout_version", "dim", "meta_dim"):
+            if getattr(self, name) != getattr(other, name):
+                return f"{name} {getattr(self, name)} vs {getattr(other, name)}"
+        placed = [[(f["name"], f["offset"], f["size"]) for f in spec.fields] for spec in (self, other)]
+        for mine, theirs in zip(*placed):
+            if mine != theirs:
+                return (f"field {mine[0]!r} at offset {mine[1]} size {mine[2]} vs "
+                        f"{theirs[0]!r} at offset {theirs[1]} size {theirs[2]}")
+        if len(placed[0]) != len(placed[1]):
+            return f"{len(placed[0])} fields vs {len(placed[1])}"
+        return None
+
+
+@dataclass(frozen=True)
+class ActionSpec:
+    """What each of the policy's outputs means."""
+
+    names: tuple[str, ...]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    units: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class GoalSpec:
+    """One meta-controller goal: its index in ``select_goal``'s output and how the runtime grounds it."""
+
+    index: int
+    name: str
+    grounding: str
+
+
+@dataclass(frozen=True)
+class SourceCheckpoint:
+    """The training checkpoint the artifact was exported from."""
+
+    file: str
+    sha256: str
+    trained_steps: int
+
+
+@dataclass(frozen=True)
+class PolicyManifest:
+    """Everything in ``manifest.json``; see docs/export.md for an example."""
+
+    format_version: int
+    format: str
+    """"torchscript" or "torch-export"."""
+    algorithm: str
+    """"hrl-sac" (meta-controller + low level) or "sac" (flat: ``select_goal`` returns -1, no goal)."""
+    subgoal_interval: int | None
+    """K, low-level steps between goal decisions; None for flat SAC."""
+    goals: tuple[GoalSpec, ...]
+    """The meta-controller's goals (empty for flat SAC)."""
+    observation: ObservationSpec
+    action: ActionSpec
+    entry_points: dict[str, str]
+    """Entry point name -> signature, in words."""
+    training_config: dict[str, Any]
+    evaluation: dict[str, Any] | str
+    """Split -> metrics of ``hrlsac evaluate`` for this very checkpoint, or "not evaluated"."""
+    source_checkpoint: SourceCheckpoint
+    torch_version: str
+    created_at: str
+    """UTC, ISO 8601."""
+
+    @property
+    def hierarchical(self) -> bool:
+        return self.subgoal_interval is not None
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str | bytes) -> "PolicyManifest":
+        """Parse and check the structure; a ValueError names the problem (unknown version, missing field)."""
+        try:
+            data = json.loads(text)
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"manifest is not valid JSON ({exc})") from None
+        if not isinstance(data, dict):
+            raise ValueError("manifest is not a JSON object")
+        version = data.get("format_version")
+        if version != FORMAT_VERSION:
+            raise ValueError(f"unknown artifact format version {version!r} (this runtime reads version "
+                             f"{FORMAT_VERSION}); export the policy again with this version of hrlsac")
+        manifest = _build(cls, data, "manifest")
+        if manifest.format not in FORMATS:
+            raise ValueError(f"manifest format {manifest.format!r} is not one of {', '.join(FORMATS)}")
+        if manifest.subgoal_interval is not None and manifest.subgoal_interval < 1:
+            raise ValueError(f"manifest subgoal_interval must be at least 1, got {manifest.subgoal_interval}")
+        return manifest
+
+
+_SIMPLE_TYPES = {"int": int, "str": str, "int | None": (int, type(None))}  # annotations, as strings
+_NESTED = {"observation": ObservationSpec, "action": ActionSpec, "source_checkpoint": SourceCheckpoint}
+
+
+def _build(cls: type, data: Any, where: str):
+    """``cls`` from a JSON object: nested dataclasses rebuilt, lists as tuples, unknown keys ignored."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where} is not a JSON object")
+    values = {}
+    for field in dataclasses.fields(cls):
+        if field.name not in data:
+            raise ValueError(f"{where} is missing the field {field.name!r}")
+        value = data[field.name]
+        expected = _SIMPLE_TYPES.get(field.type)
+        if expected is not None and (not isinstance(value, expected) or isinstance(value, bool)):
+            raise ValueError(f"{where}.{field.name} must be {field.type}, got {value!r}")
+        if field.name in _NESTED:
+            value = _build(_NESTED[field.name], value, f"{where}.{field.name}")
+        elif field.name == "goals":
+            value = tuple(_build(GoalSpec, goal, f"{where}.goals[{i}]") for i, goal in enumerate(value))
+        elif isinstance(value, list):
+            value = tuple(value)
+        values[field.name] = value
+    return cls(**values)
+
+
+def summary_lines(manifest: PolicyManifest) -> list[str]:
+    """A short human summary (``hrlsac export`` prints it, ``hrlsac policy info`` starts with it)."""
+    config, source = manifest.training_config, manifest.source_checkpoint
+    hierarchy = (f"K = {manifest.subgoal_interval}, goals {', '.join(g.name for g in manifest.goals)}"
+                 if manifest.hierarchical else "flat (no meta-controller)")
+    actions = ", ".join(f"{name} [{low:g}, {high:g}]" for name, low, high
+                        in zip(manifest.action.names, manifest.action.low, manifest.action.high))
+    return [
+        f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}): {hierarchy}",
+        f"  trained: {config.get('preset')} preset, seed {config.get('seed')}, {source.trained_steps:,} steps; "
+        f"from {source.file} (sha256 {source.sha256[:16]}...)",
+        f"  observation: layout version {manifest.observation.layout_version}, {manifest.observation.dim} values "
+        f"(meta-controller {manifest.observation.meta_dim}); actions: {actions}",
+        f"  evaluation: {evaluation_summary(manifest.evaluation)}",
+        f"  exported {manifest.created_at} with torch {manifest.torch_version}",
+    ]
+
+
+def evaluation_summary(evaluation: dict[str, Any] | str) -> str:
+    """One line per manifest: success, reward and coverage of each evaluated split, or "not evaluated"."""
+    if not isinstance(evaluation, dict) or not evaluation:
+        return NOT_EVALUATED
+    nan = float("nan")
+    return "; ".join(f"{split} ({m.get('episodes')} episodes): success {m.get('success_rate', nan):.1%}, "
+                     f"reward {m.get('reward_mean', nan):.1f}, coverage {m.get('coverage_mean', nan):.1%}"
+                     for split, m in evaluation.items())
