@@ -30,10 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from missions.goals import GOAL_NAMES  # noqa: F401  (re-exported: the runtime names goals from here)
+from missions.goals import GOAL_NAMES, NO_GOAL  # noqa: F401  (re-exported: the runtime names goals from here)
+from missions.search import downsample_coverage
 
 OBSERVATION_LAYOUT_VERSION = 1
-NO_GOAL = -1
 
 
 @dataclass(frozen=True)
@@ -110,3 +110,17 @@ def build_observations(agent_ne: np.ndarray, target_ne: np.ndarray, area: np.nda
     out[:, 16:272] = coverage_blocks
     out[:, 272:276] = goal[:, None] == _GOAL_INDICES  # NO_GOAL matches nothing: all zero
     return out
+
+
+def observe_search(state, goal_conditioned: bool, rows: np.ndarray | None = None,
+                   out: np.ndarray | None = None) -> np.ndarray:
+    """The observations of a ``missions.search_state.SearchState`` (all searches, or ``rows``): what the
+    environment and the mission runner both give the policy. ``goal_conditioned``: HRL-SAC's target and goal
+    one-hot; otherwise flat SAC's (last detection / drifting datum, no goal)."""
+    rows = slice(None) if rows is None else rows
+    scen = state.scen
+    goal = state.goal[rows] if goal_conditioned else np.full(len(state.goal[rows]), NO_GOAL)
+    return build_observations(state.position[rows], state.target_position(goal_conditioned)[rows], scen.area[rows],
+                              state.steps[rows] / state.flight.max_steps, scen.sea[rows], scen.weather[rows],
+                              scen.time_of_day[rows], scen.visibility[rows], scen.wind[rows],
+                              state.detections[rows], downsample_coverage(state.coverage[rows]), goal, out=out)

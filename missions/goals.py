@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 GOAL_NAMES: tuple[str, ...] = ("ExploreArea", "SearchSpecificLocation", "TrackObject", "ReturnToBase")
+NO_GOAL = -1
+"""Goal index of a search without a meta-controller goal (flat SAC, or before the first decision)."""
 EXPLORE, SEARCH_LOCATION, TRACK_OBJECT, RETURN_TO_BASE = range(4)
 BLOCKS = 8  # ExploreArea works on an 8 x 8 grid of blocks
 DISTANCE_WEIGHT = 0.5

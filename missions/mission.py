@@ -1,10 +1,10 @@
 """A mission: a scenario plus how to fly it (altitude, speed, geofence, decision timing, limits)."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from missions.scenario import Scenario, SearchArea
+from missions.validation import check_fields
 
 
 @dataclass(frozen=True)
@@ -25,16 +25,9 @@ class FlightSettings:
     """Horizontal distance to the primary target that counts as reaching it (m). Allowed [1, 100]."""
 
     def __post_init__(self) -> None:
-        for name, low, high in (("altitude_m", 10.0, 120.0), ("max_speed_mps", 1.0, 20.0),
-                                ("step_period_s", 0.1, 10.0), ("subgoal_interval", 1, 1000),
-                                ("max_steps", 10, 100_000), ("reach_radius_m", 1.0, 100.0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not low <= value <= high:
-                raise ValueError(f"FlightSettings.{name} must be in [{low:g}, {high:g}], got {value!r}")
-        for name in ("subgoal_interval", "max_steps"):
-            if int(getattr(self, name)) != getattr(self, name):
-                raise ValueError(f"FlightSettings.{name} must be an integer, got {getattr(self, name)!r}")
+        check_fields(self, (("altitude_m", 10.0, 120.0), ("max_speed_mps", 1.0, 20.0), ("step_period_s", 0.1, 10.0),
+                            ("subgoal_interval", 1, 1000), ("max_steps", 10, 100_000), ("reach_radius_m", 1.0, 100.0)),
+                     integers=("subgoal_interval", "max_steps"))
 
 
 @dataclass(frozen=True)

@@ -7,10 +7,10 @@ the training environment, the mission files, the datasets and the flight runtime
 from __future__ import annotations
 
 import enum
-import math
 from dataclasses import dataclass, field
 
 from missions.geodesy import GeoPoint
+from missions.validation import check_number
 
 # The paper's six object categories, in the order of the observation's detection binaries.
 CATEGORIES: tuple[str, ...] = ("person", "boat", "life_jacket", "debris", "floating_object", "swimmer")
@@ -36,11 +36,6 @@ class TimeOfDay(enum.IntEnum):
     NIGHT = 3
 
 
-def _check_range(owner: str, name: str, value: float, low: float, high: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"{owner}.{name} must be a number in [{low:g}, {high:g}], got {value!r}")
-
-
 @dataclass(frozen=True)
 class Conditions:
     """Environmental conditions; all 3 x 4 x 4 = 48 sea/weather/time combinations are allowed."""
@@ -62,9 +57,9 @@ class Conditions:
         object.__setattr__(self, "sea", SeaState(self.sea))
         object.__setattr__(self, "weather", Weather(self.weather))
         object.__setattr__(self, "time_of_day", TimeOfDay(self.time_of_day))
-        _check_range("Conditions", "visibility", self.visibility, 0.3, 1.0)
-        _check_range("Conditions", "wind", self.wind, 0.0, 1.0)
-        _check_range("Conditions", "wind_direction_deg", self.wind_direction_deg, -360.0, 360.0)
+        check_number("Conditions", "visibility", self.visibility, 0.3, 1.0)
+        check_number("Conditions", "wind", self.wind, 0.0, 1.0)
+        check_number("Conditions", "wind_direction_deg", self.wind_direction_deg, -360.0, 360.0)
 
 
 WIND_FULL_SCALE_MPS = 15.0  # Conditions.wind = 1 means a 15 m/s (about 30 kn, Beaufort 7) wind
@@ -83,8 +78,8 @@ class Target:
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:
             raise ValueError(f"Target.category must be one of {', '.join(CATEGORIES)}, got {self.category!r}")
-        _check_range("Target", "north_m", self.north_m, -1e6, 1e6)
-        _check_range("Target", "east_m", self.east_m, -1e6, 1e6)
+        check_number("Target", "north_m", self.north_m, -1e6, 1e6)
+        check_number("Target", "east_m", self.east_m, -1e6, 1e6)
 
 
 @dataclass(frozen=True)
@@ -96,7 +91,7 @@ class Obstacle:
     radius_m: float
 
     def __post_init__(self) -> None:
-        _check_range("Obstacle", "radius_m", self.radius_m, 0.1, 1e5)
+        check_number("Obstacle", "radius_m", self.radius_m, 0.1, 1e5)
 
 
 @dataclass(frozen=True)
@@ -165,9 +160,9 @@ class Scenario:
         primaries = sum(1 for t in self.targets if t.primary)
         if self.targets and primaries != 1:
             raise ValueError(f"Scenario.targets must contain exactly one primary target, got {primaries}")
-        _check_range("Scenario", "datum_sigma_m", self.datum_sigma_m, 0.0, 1e5)
-        _check_range("Scenario", "current_north_mps", self.current_north_mps, -5.0, 5.0)
-        _check_range("Scenario", "current_east_mps", self.current_east_mps, -5.0, 5.0)
+        check_number("Scenario", "datum_sigma_m", self.datum_sigma_m, 0.0, 1e5)
+        check_number("Scenario", "current_north_mps", self.current_north_mps, -5.0, 5.0)
+        check_number("Scenario", "current_east_mps", self.current_east_mps, -5.0, 5.0)
         if not self.area.contains(self.start_north_m, self.start_east_m):
             raise ValueError("Scenario: the start position must lie inside the search area")
 

@@ -222,7 +222,7 @@ ALL_INLINE = "home, area, start, datum, targets, obstacles, conditions, current,
 EXACTLY_ONE = "give exactly one of: inline fields (home, area, datum, targets, ...), generator, dataset; got"
 
 ERRORS = {
-    "range": (changed(flight__altitude_m=500), "flight.altitude_m: must be in [10, 120], got 500"),
+    "range": (changed(flight__altitude_m=500), "flight.altitude_m: must be a number in [10, 120], got 500"),
     "integer": (changed(flight__max_steps=100.5), "flight.max_steps: must be an integer, got 100.5"),
     "number type": (changed(flight__max_speed_mps="fast"), "flight.max_speed_mps: must be a number, got 'fast'"),
     "bool is not a number": (changed(flight__altitude_m=True), "flight.altitude_m: must be a number, got true"),
@@ -331,9 +331,9 @@ def test_missing_file_and_folder(tmp_path: Path) -> None:
 def test_error_attributes() -> None:
     with pytest.raises(MissionFileError) as caught:
         mission_from_dict(changed(flight__altitude_m=500), Path("."), source="demo.yaml")
-    assert str(caught.value) == "demo.yaml: flight.altitude_m: must be in [10, 120], got 500"
+    assert str(caught.value) == "demo.yaml: flight.altitude_m: must be a number in [10, 120], got 500"
     assert (caught.value.file, caught.value.field) == ("demo.yaml", "flight.altitude_m")
-    assert caught.value.reason == "must be in [10, 120], got 500"
+    assert caught.value.reason == "must be a number in [10, 120], got 500"
 
 
 @pytest.mark.parametrize("typo, suggestion", [("altitude", "altitude_m"), ("max_step", "max_steps"),
