@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("policies.compare_cli", "compare trained runs and the scripted baselines: markdown report and figures"),
     "export": ("policies.export_cli", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
     "policy": ("autonomy.policy_cli", "inspect an exported policy artifact (policy info) with the on-board runtime"),
+    "mission": ("autonomy.mission_cli", "fly a search mission with a policy: replay in the simulated vehicle, or run"),
 }
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"

@@ -13,7 +13,7 @@ import numpy as np
 
 from autonomy.observation import OBS_DIM
 from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchBatch, SarSearchConfig, next_episode_seed
-from policies.render import render_search
+from missions.render import render_search
 
 
 class SarSearchEnv(gym.Env):
@@ -69,4 +69,4 @@ class SarSearchEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
-        return render_search(self.core, 0, self._path)
+        return render_search(self.core, 0, self._path, float(self.core.last_action[0, 3]))

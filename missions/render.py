@@ -1,7 +1,7 @@
-"""Drawing a search as an RGB image with OpenCV (the environment's ``render()`` and replay videos)."""
+"""Drawing a search as an RGB image with OpenCV (the environment's ``render()``, mission replay images and videos)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -9,9 +9,7 @@ import numpy as np
 from missions import search
 from missions.goals import GOAL_NAMES
 from missions.scenario import CATEGORIES
-
-if TYPE_CHECKING:
-    from policies.env_core import SarSearchBatch
+from missions.search_state import SearchState
 
 SIZE_PX = 512
 # BGR-free: colours are RGB because the image is returned as RGB.
@@ -21,8 +19,9 @@ SEA = np.array([20, 60, 110], dtype=np.uint8)
 COVERED = np.array([50, 110, 150], dtype=np.uint8)
 
 
-def render_search(core: "SarSearchBatch", index: int, path: Sequence[tuple[float, float]]) -> np.ndarray:
-    """(512, 512, 3) uint8 RGB: coverage, danger zones, objects (victim ringed), datum, path, footprint, goal."""
+def render_search(core: SearchState, index: int, path: Sequence[tuple[float, float]], zoom: float) -> np.ndarray:
+    """(512, 512, 3) uint8 RGB of search ``index``: coverage, danger zones, objects (victim ringed), datum, the
+    path flown, the camera footprint (at ``zoom``) and the current goal."""
     area = core.scen.area[index]
 
     def pixel(north: float, east: float) -> tuple[int, int]:
@@ -51,7 +50,7 @@ def render_search(core: "SarSearchBatch", index: int, path: Sequence[tuple[float
         points = np.array([pixel(n, e) for n, e in path], dtype=np.int32)
         cv2.polylines(image, [points], False, (120, 255, 120), 1, cv2.LINE_AA)
     north, east = core.position[index]
-    half = float(search.footprint_half_width_m(core.flight.altitude_m, core.last_action[index, 3]))
+    half = float(search.footprint_half_width_m(core.flight.altitude_m, zoom))
     cv2.rectangle(image, pixel(north + half, east - half), pixel(north - half, east + half), (120, 255, 120), 1)
     cv2.circle(image, pixel(north, east), 4, (120, 255, 120), -1)
     if core.goal[index] >= 0:

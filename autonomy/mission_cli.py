@@ -1,0 +1,124 @@
+"""``hrlsac mission``: fly a search mission with an exported policy.
+
+* ``hrlsac mission replay MISSION.yaml --policy P.pt``: against the in-process simulated vehicle in lockstep,
+  as fast as the machine allows, deterministic for a seed; writes flight.tlog, report.json, trajectory.png and
+  replay.mp4 per episode.
+* ``hrlsac mission run MISSION.yaml --policy P.pt --connect URL``: against any MAVLink vehicle (PX4 SITL, a
+  real autopilot, ``hrlsac sitl``) in real time, the policy in its own thread.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_OUT = Path("mission-output")
+
+
+def build_parser(prog: str) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0].split(": ", 1)[1])
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, summary in (("replay", "fly the mission in the simulated vehicle, in lockstep (deterministic)"),
+                          ("run", "fly the mission on a MAVLink vehicle in real time")):
+        sub = commands.add_parser(name, help=summary, description=summary,
+                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        sub.add_argument("mission", help="mission file (YAML), e.g. missions/library/demo.yaml")
+        sub.add_argument("--policy", required=True, help="policy artifact written by 'hrlsac export'")
+        sub.add_argument("--out", type=Path, default=None,
+                         help=f"output folder (default: {DEFAULT_OUT}/MISSION-NAME)")
+        sub.add_argument("--seed", type=int, default=0,
+                         help="seed of the simulated camera's detections (and of the vehicle's sensor noise)")
+        sub.add_argument("--quiet", action="store_true", help="print only the summary")
+        if name == "replay":
+            sub.add_argument("--episodes", type=int, default=1, help="fly seeds SEED .. SEED+EPISODES-1")
+            sub.add_argument("--no-video", action="store_true", help="skip replay.mp4 (faster)")
+        else:
+            sub.add_argument("--connect", required=True,
+                             help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
+    return parser
+
+
+def main(argv: list[str], prog: str = "hrlsac mission") -> int:
+    args = build_parser(prog).parse_args(argv)
+    name = f"{prog} {args.command}"
+    from autonomy.policy import PolicyArtifactError, load_policy
+    from missions.mission_file import MissionFileError, load_mission
+
+    try:
+        mission = load_mission(args.mission)
+        policy = load_policy(args.policy)
+        if args.command == "replay" and not 1 <= args.episodes <= 100_000:
+            raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+    except (MissionFileError, PolicyArtifactError, ValueError) as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or DEFAULT_OUT / (mission.name or Path(args.mission).stem)
+    if args.command == "replay":
+        return _replay(mission, policy, args, out)
+    return _run(mission, policy, args, out, name)
+
+
+def _replay(mission, policy, args, out: Path) -> int:
+    from autonomy.replay import replay_mission
+
+    reports = []
+    started = time.perf_counter()
+    for episode in range(args.episodes):
+        seed = args.seed + episode
+        folder = out if args.episodes == 1 else out / f"seed-{seed:05d}"
+        say = print if (args.episodes == 1 and not args.quiet) else (lambda text: None)
+        report = replay_mission(mission, policy, seed=seed, out=folder, video=not args.no_video, say=say)
+        reports.append(report)
+        if args.episodes > 1 and not args.quiet:
+            done = episode + 1
+            rate = sum(r["success"] for r in reports) / done
+            print(f"\r[{'#' * (30 * done // args.episodes):<30}] {done}/{args.episodes} episodes  "
+                  f"success {rate:.0%}  ({time.perf_counter() - started:.0f} s)", end="", file=sys.stderr)
+    if args.episodes > 1 and not args.quiet:
+        print(file=sys.stderr)
+    wall = time.perf_counter() - started
+    simulated = sum(r["flight_time_s"] for r in reports)
+    successes = sum(r["success"] for r in reports)
+    print(f"{mission.name}: {successes}/{len(reports)} searches found the victim "
+          f"({simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time)")
+    if len(reports) == 1:
+        r = reports[0]
+        detection = f"{r['time_to_detection_s']:.0f} s" if r["time_to_detection_s"] is not None else "never"
+        print(f"  search ended: {r['search_end']} after {r['steps']} decisions; victim detected: {detection}; "
+              f"coverage {r['coverage_ratio']:.0%}; path {r['path_length_m']:.0f} m; "
+              f"{r['setpoints_sent']} setpoints")
+    print(f"  report: {out / 'report.json' if len(reports) == 1 else out}")
+    return 0
+
+
+def _run(mission, policy, args, out: Path, name: str) -> int:
+    from autonomy.estimator import PoseEstimator
+    from autonomy.recorder import REPORT, TLOG, TlogRecorder, write_json_atomic
+    from autonomy.runner import MissionRunner, WallClock
+    from autonomy.search_pilot import SearchPilot
+    from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
+
+    try:
+        connection = open_connection(args.connect)
+    except LinkError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    clock = WallClock()
+    tlog = TlogRecorder(out / TLOG)
+    say = (lambda text: None) if args.quiet else print
+    runner = MissionRunner(mission, SearchPilot(mission, policy, args.seed),
+                           VehicleLink(connection, clock.now, tlog), clock,
+                           PoseEstimator(home=mission.scenario.home), threaded_policy=True, say=say)
+    try:
+        report = runner.run()
+    finally:
+        tlog.close()
+        connection.close()
+    report.update(policy=str(policy.path), policy_sha256=policy.sha256, seed=args.seed, clock="wall",
+                  connect=args.connect, tlog_messages=tlog.messages)
+    write_json_atomic(out / REPORT, report)
+    print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "
+          f"report: {out / REPORT}")
+    return 1 if any(event["event"] == "abort" for event in report["events"]) else 0

@@ -1,0 +1,134 @@
+"""The search brain of the mission runner: one policy decision per step, from the filtered pose.
+
+Each decision step (``FlightSettings.step_period_s``) the runner hands :meth:`SearchPilot.decide` the drone's
+filtered (north, east) in the mission frame. The pilot then does exactly what the training environment does
+after its dynamics step (the same ``missions.search_state.SearchState``, the same observation builder):
+
+1. advance the search state to that position with the sensor settings of the previous decision: drift,
+   coverage, detections by the simulated camera (the mission's objects and the detection model, with draws
+   keyed by the mission seed), end conditions;
+2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
+3. act on the observation: movement north/east in [-1, 1] scaled to the mission's speed limit, search
+   intensity and camera zoom in [0, 1].
+
+The camera is simulated in every mode, also against a real autopilot: a real payload would feed its
+detections here instead (not built; see docs/runner.md).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from autonomy.observation import observe_search
+from autonomy.policy import Policy
+from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
+from missions.mission import Mission
+from missions.search import ScenarioBatch
+from missions.search_state import SearchState
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One step's outcome: what to fly, and whether the search is over (and why)."""
+
+    step: int
+    velocity_ne: tuple[float, float]
+    """Horizontal velocity command (m/s), north and east."""
+    intensity: float
+    zoom: float
+    goal: int
+    """Current goal index (NO_GOAL for a flat policy)."""
+    goal_point: tuple[float, float]
+    new_goal: bool
+    """Whether the meta-controller decided this step."""
+    end: str | None = None
+    """None while searching; else "victim reached", "return to base", "step limit", "entered a danger zone"
+    or "left the geofence"."""
+    action: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    """The policy's raw action (NaN if it returned one: the runner's guard decides)."""
+
+
+class SearchPilot:
+    """Turns filtered positions into policy decisions for one mission; see the module docstring."""
+
+    def __init__(self, mission: Mission, policy: Policy, seed: int = 0):
+        self.mission, self.policy = mission, policy
+        self.flight = mission.flight
+        self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
+        scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence])
+        self.state = SearchState(scen, self.flight)
+        self.state.reset(np.array([0]), np.array([seed], dtype=np.uint64))
+        self.intensity = np.zeros(1)
+        self.zoom = np.zeros(1)
+        self.goal_segments = 0
+        self.goals_reached = 0
+        self._segment_reached = False
+        self._started = False
+
+    @property
+    def step(self) -> int:
+        return int(self.state.steps[0])
+
+    def decide(self, position_ne: np.ndarray) -> Decision:
+        """One decision at the drone's position (2,); the first call starts the search there."""
+        state = self.state
+        position = np.asarray(position_ne, dtype=np.float64).reshape(1, 2)
+        end = None
+        if not self._started:  # the search starts where the drone is: no step flown yet
+            self._started = True
+            state.position[:] = position
+        else:
+            out = state.advance(position, self.intensity, self.zoom, self.flight.step_period_s)
+            self._segment_reached |= bool(out.goal_reached[0])
+            end = self._end_reason(out)
+        new_goal = False
+        if end is None and self.policy.hierarchical and self.step % self.subgoal_interval == 0:
+            self._close_segment()
+            goal = int(self.policy.select_goal(observe_search(state, True)[0, :272]))
+            state.set_goals(np.array([goal]))
+            new_goal = True
+            if goal == RETURN_TO_BASE:
+                end = "return to base"
+        obs = observe_search(state, self.policy.hierarchical)
+        action = self.policy.act(obs[0]).astype(np.float64)
+        if end is not None:
+            self._close_segment()
+        finite = bool(np.all(np.isfinite(action)))
+        if finite:
+            self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
+        movement = np.clip(action[:2], -1.0, 1.0) * self.flight.max_speed_mps if finite else np.array([np.nan] * 2)
+        return Decision(self.step, (float(movement[0]), float(movement[1])), float(self.intensity[0]),
+                        float(self.zoom[0]), int(state.goal[0]), tuple(state.goal_point[0].tolist()), new_goal,
+                        end, tuple(float(a) for a in action))
+
+    def _end_reason(self, out) -> str | None:
+        if out.success[0]:
+            return "victim reached"
+        if out.collision[0]:
+            return "entered a danger zone"
+        if out.out_of_bounds[0]:
+            return "left the geofence"
+        if self.step >= self.flight.max_steps:
+            return "step limit"
+        return None
+
+    def _close_segment(self) -> None:
+        if self.state.goal[0] != NO_GOAL:
+            self.goal_segments += 1
+            self.goals_reached += self._segment_reached
+        self._segment_reached = False
+
+    def summary(self) -> dict:
+        """The search part of the mission report."""
+        state = self.state
+        first = int(state.first_detection_step[0])
+        return {
+            "steps": self.step,
+            "victim_detected": bool(state.has_detection[0]),
+            "first_detection_step": first if first >= 0 else None,
+            "time_to_detection_s": first * self.flight.step_period_s if first >= 0 else None,
+            "coverage_ratio": float(state.coverage_ratio[0]),
+            "subgoal_reachability": (self.goals_reached / self.goal_segments) if self.goal_segments else None,
+            "goal_names": list(GOAL_NAMES),
+        }

@@ -1,0 +1,173 @@
+"""The companion computer's MAVLink side: one pymavlink connection to the autopilot.
+
+:func:`open_connection` turns a URL into a pymavlink connection (``udpin:HOST:PORT``, ``udpout:HOST:PORT``,
+``tcp:HOST:PORT``, ``serial:DEVICE[:BAUD]`` or a bare device path); lockstep replays pass an in-memory
+connection instead. :class:`VehicleLink` then does what every companion computer does and nothing more:
+
+* identifies itself with a HEARTBEAT (type ONBOARD_CONTROLLER, autopilot INVALID) once per second;
+* discovers the vehicle from the first autopilot HEARTBEAT and addresses everything to it;
+* keeps what the runner reads: the latest message of each type, the flight mode (PX4 custom modes, decoded by
+  pymavlink), the time of the last vehicle message (telemetry loss), COMMAND_ACKs and STATUSTEXTs;
+* sends COMMAND_LONG, SET_MESSAGE_INTERVAL and velocity setpoints;
+* hands every message, both directions, to an optional recorder (the tlog) with the run's clock.
+
+It does not wait for anything itself: the runner owns time (simulated in lockstep, real otherwise) and waits by
+ticking; see ``autonomy.runner``.
+"""
+from __future__ import annotations
+
+import math
+import re
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from autonomy.setpoints import VelocityCommand, setpoint_message_args
+
+COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+HEARTBEAT_PERIOD_S = 1.0
+_URL = re.compile(r"^(udpin|udpout|tcp):[^:]+:\d{1,5}$")
+_NOT_A_VEHICLE = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
+
+
+class LinkError(RuntimeError):
+    """The connection cannot be opened or the vehicle misbehaves; one line naming the problem."""
+
+
+class Recorder(Protocol):
+    def record(self, time_s: float, data: bytes) -> None: ...
+
+
+def open_connection(url: str, system_id: int = 1):
+    """A pymavlink connection for ``url`` as the companion computer (``system_id``, component 191)."""
+    target = url
+    if url.startswith("serial:"):
+        parts = url[len("serial:"):].rsplit(":", 1)
+        target = parts[0] if len(parts) == 1 or not parts[1].isdigit() else f"{parts[0]},{parts[1]}"
+    elif not (_URL.match(url) or url.startswith("/dev/") or url.upper().startswith("COM")):
+        raise LinkError(f"cannot use connection {url!r}: write udpin:HOST:PORT (listen, e.g. udpin:0.0.0.0:14540 "
+                        "for PX4 SITL), udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
+    try:
+        return mavutil.mavlink_connection(target, source_system=system_id, source_component=COMPANION_COMPONENT,
+                                          dialect="common", autoreconnect=True)
+    except OSError as exc:
+        raise LinkError(f"cannot open connection {url!r}: {exc.strerror or exc}") from None
+
+
+@dataclass
+class CommandAck:
+    command: int
+    result: int
+    time_s: float
+
+
+@dataclass
+class VehicleLink:
+    """See the module docstring. ``clock()`` is the run's time in seconds."""
+
+    conn: object
+    clock: Callable[[], float]
+    recorder: Recorder | None = None
+    target_system: int | None = None
+    target_component: int = 1
+    latest: dict[str, object] = field(default_factory=dict)
+    """The most recent message of each type from the vehicle."""
+    last_vehicle_message_s: float | None = None
+    acks: deque = field(default_factory=lambda: deque(maxlen=64))
+    status_texts: list[str] = field(default_factory=list)
+    sent_heartbeats: int = 0
+    _next_heartbeat_s: float = -math.inf  # the first tick sends and anchors the 1 Hz schedule
+
+    def __post_init__(self) -> None:
+        self.conn.mav.set_send_callback(self._on_send)
+        self.boot_s = self.clock()
+
+    # ------------------------------------------------------------------ time and housekeeping
+    @property
+    def time_boot_ms(self) -> int:
+        """Milliseconds since this link started, for the time_boot_ms field of what we send."""
+        return int(round((self.clock() - self.boot_s) * 1000.0)) & 0xFFFFFFFF
+
+    def tick(self) -> list:
+        """Receive everything waiting and send the heartbeat when due; returns the messages received."""
+        now = self.clock()
+        if now + 1e-9 >= self._next_heartbeat_s:
+            self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
+                                         0, 0, mavlink.MAV_STATE_ACTIVE)
+            self.sent_heartbeats += 1
+            self._next_heartbeat_s += HEARTBEAT_PERIOD_S
+            if self._next_heartbeat_s <= now:
+                self._next_heartbeat_s = now + HEARTBEAT_PERIOD_S
+        received = []
+        while (msg := self.conn.recv_msg()) is not None:
+            if msg.get_type() == "BAD_DATA":
+                continue
+            if self.recorder is not None:
+                self.recorder.record(now, bytes(msg.get_msgbuf()))
+            if self._accept(msg, now):
+                received.append(msg)
+        return received
+
+    def _accept(self, msg, now: float) -> bool:
+        """Keep the vehicle's messages (discovering it from its first autopilot heartbeat)."""
+        source = msg.get_srcSystem()
+        if self.target_system is None:
+            if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID \
+                    or msg.type in _NOT_A_VEHICLE:
+                return False
+            self.target_system, self.target_component = source, msg.get_srcComponent()
+            self.conn.mav.srcSystem = source  # a companion computer shares its vehicle's system id
+        if source != self.target_system:
+            return False
+        self.latest[msg.get_type()] = msg
+        self.last_vehicle_message_s = now
+        if msg.get_type() == "COMMAND_ACK":
+            self.acks.append(CommandAck(msg.command, msg.result, now))
+        elif msg.get_type() == "STATUSTEXT":
+            self.status_texts.append(msg.text)
+        return True
+
+    def _on_send(self, msg) -> None:
+        if self.recorder is not None:
+            self.recorder.record(self.clock(), bytes(msg.get_msgbuf()))
+
+    # ------------------------------------------------------------------ what the runner reads
+    @property
+    def discovered(self) -> bool:
+        return self.target_system is not None
+
+    @property
+    def flight_mode(self) -> str | None:
+        """PX4 mode name of the latest HEARTBEAT ("OFFBOARD", "RTL", ...), None before one arrived."""
+        beat = self.latest.get("HEARTBEAT")
+        return None if beat is None else mavutil.interpret_px4_mode(beat.base_mode, beat.custom_mode)
+
+    @property
+    def armed(self) -> bool:
+        beat = self.latest.get("HEARTBEAT")
+        return bool(beat is not None and beat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    def ack_for(self, command: int, since_s: float) -> CommandAck | None:
+        """The first ACK of ``command`` received at or after ``since_s``."""
+        return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
+
+    # ------------------------------------------------------------------ what the runner sends
+    def _target(self) -> tuple[int, int]:
+        if self.target_system is None:
+            raise LinkError("no vehicle discovered yet (no autopilot HEARTBEAT received)")
+        return self.target_system, self.target_component
+
+    def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
+        padded = tuple(params) + (0.0,) * (7 - len(params))
+        self.conn.mav.command_long_send(*self._target(), command, confirmation, *padded)
+
+    def request_message_interval(self, message_id: int, rate_hz: float) -> None:
+        self.send_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, 1e6 / rate_hz))
+
+    def send_velocity(self, command: VelocityCommand, now_s: float) -> None:
+        del now_s  # the stream's schedule; the message carries our boot time
+        self.conn.mav.set_position_target_local_ned_send(
+            *setpoint_message_args(command, self.time_boot_ms, *self._target()))
