@@ -11,6 +11,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from autonomy.policy import Policy, load_policy
 from autonomy.replay import replay_mission
 from autonomy.vehicle_link import COMPANION_COMPONENT
+from conftest import free_udp_ports
 from missions.mission import FlightSettings, Mission
 from missions.mission_file import save_mission
 from missions.scenario import Scenario, SearchArea, Target
@@ -200,3 +204,74 @@ def test_the_geofence_guard_turns_back_a_policy_flying_out_of_the_area(policy, t
     assert any(e["event"] == "geofence" for e in report["events"])
     east = np.array([e for _, _, e in report["trajectory"]])
     assert east.max() < mission.fence.east_max_m and east[-1] > mission.fence.east_max_m - 60.0
+
+
+# ---------------------------------------------------------------------------------------- the command
+HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
+
+
+@pytest.fixture(scope="module")
+def mission_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("missions") / "small.yaml"
+    save_mission(small_mission(), path)
+    return path
+
+
+def test_mission_replay_command_prints_a_summary_and_writes_the_report(policy, mission_file, tmp_path):
+    result = subprocess.run([*HRLSAC, "mission", "replay", str(mission_file), "--policy", str(policy.path),
+                             "--out", str(tmp_path), "--seed", "2", "--no-video"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert [t["to"] for t in report["transitions"]][-1] == "DONE" and report["seed"] == 2
+    assert f"small: {int(report['success'])}/1 searches found the victim" in result.stdout
+    assert f"report: {tmp_path / 'report.json'}" in result.stdout
+    assert "SEARCH -> RTL" in result.stdout  # the transitions, with their reasons
+
+
+@pytest.mark.parametrize("change, message", [
+    (("--policy", "missing.pt"), "missing.pt: no such file"),
+    (("--episodes", "0"), "--episodes must be in [1, 100000], got 0"),
+])
+def test_mission_command_turns_bad_input_into_one_line(policy, mission_file, change, message):
+    args = {"--policy": str(policy.path), "--episodes": "1"}
+    args[change[0]] = change[1]
+    result = subprocess.run([*HRLSAC, "mission", "replay", str(mission_file), *sum(args.items(), ())],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hrlsac mission replay: error: ") and lines[0].endswith(message)
+
+
+def test_mission_run_refuses_a_bad_connection_url(policy, mission_file):
+    result = subprocess.run([*HRLSAC, "mission", "run", str(mission_file), "--policy", str(policy.path),
+                             "--connect", "udp:nowhere"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.stderr
+
+
+@pytest.mark.slow
+def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path):
+    """A short mission, end to end: ``hrlsac sitl`` as its own process, the runner over UDP, wall clock."""
+    mission = small_mission(altitude_m=10.0, max_steps=10)
+    path = tmp_path / "short.yaml"
+    save_mission(mission, path)
+    home = mission.scenario.home
+    api_port, api_remote = free_udp_ports(2)
+    sitl = subprocess.Popen([*HRLSAC, "sitl", "--api-port", str(api_port), "--api-remote", str(api_remote),
+                             "--gcs-remote", "0", "--home", f"{home.lat_deg},{home.lon_deg},{home.alt_m}",
+                             "--param", "RTL_RETURN_ALT=12", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--policy", str(policy.path),
+                                 "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out")],
+                                capture_output=True, text=True, timeout=240)
+    finally:
+        sitl.send_signal(signal.SIGINT)
+        sitl.communicate(timeout=10)
+    assert result.returncode == 0, result.stdout + result.stderr
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert [t["to"] for t in report["transitions"]] == ALL_STATES
+    assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
+    setpoints = ours(read_tlog(tmp_path / "out" / "flight.tlog"), "SET_POSITION_TARGET_LOCAL_NED")
+    assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
