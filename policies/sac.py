@@ -53,7 +53,7 @@ class SAC(CheckpointedAgent):
         obs_dim: observation size (276 for SarSearch).
         act_dim: action size (4).
         action_low, action_high: the environment's action box; ``act`` returns and ``update`` takes actions in it.
-        config: ``actor`` / ``critic`` networks, ``learning_rate``, ``gamma``, ``tau``, ``log_std_bounds``,
+        config: ``actor`` / ``critic`` networks, ``learning_rate``, ``sac_gamma``, ``tau``, ``log_std_bounds``,
             ``target_entropy`` (None = -act_dim) and ``initial_alpha`` are used.
         seed: the only source of randomness (see the module docstring).
     """
@@ -65,7 +65,7 @@ class SAC(CheckpointedAgent):
         self.scaler = ActionScaler(action_low, action_high)
         if self.scaler.dim != self.act_dim:
             raise ValueError(f"action bounds have {self.scaler.dim} dimensions, act_dim is {self.act_dim}")
-        self.gamma, self.tau = float(config.gamma), float(config.tau)
+        self.gamma, self.tau = float(config.sac_gamma), float(config.tau)
         self.target_entropy = float(-act_dim if config.target_entropy is None else config.target_entropy)
 
         init_seed, noise_seed, dropout_seed = derive_seeds(seed, 3)

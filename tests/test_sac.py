@@ -239,14 +239,15 @@ def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
                                np.mean((0.25 - expected) ** 2 + (-0.75 - expected) ** 2), rtol=1e-5)
     assert metrics["q_mean"] == pytest.approx(-0.25) and metrics["alpha"] == pytest.approx(0.5)
 
-    # Without "discount" the config's gamma is used.
+    # Without "discount" the config's discount of this SAC is used (HRL-SAC's low level here: low_level_gamma).
+    assert agent.config.algo == "hrl-sac" and agent.gamma == agent.config.low_level_gamma == 0.95
     del batch["discount"]
     constant_output(agent.critic.q1, 0.25)
     constant_output(agent.critic.q2, -0.75)
     constant_output(agent.critic_target.q1, 4.0)
     constant_output(agent.critic_target.q2, 1.5)
     alpha = agent.alpha
-    expected = batch["reward"] + 0.99 * (1 - batch["done"]) * (1.5 - alpha * log_pi_next)
+    expected = batch["reward"] + 0.95 * (1 - batch["done"]) * (1.5 - alpha * log_pi_next)
     td, _ = agent.update(batch)
     np.testing.assert_allclose(td, 0.5 * (np.abs(0.25 - expected) + np.abs(-0.75 - expected)), rtol=1e-5)
 
@@ -486,3 +487,12 @@ def test_sac_learns_a_one_step_bandit():
     action = agent.act(state[0], deterministic=True)
     assert np.abs(action - a_star).max() < 0.1, action
     assert agent.alpha < 0.05  # entropy above -|A| = -2 at the start: the temperature came down
+
+
+def test_the_low_level_and_flat_sac_discount_by_their_own_gamma():
+    assert SAC(3, 2, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), small_config(algo="sac"), seed=0).gamma == 0.99
+    hrl = small_config(algo="hrl-sac", low_level_gamma=0.9)
+    assert SAC(3, 2, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), hrl, seed=0).gamma == 0.9
+    assert TrainConfig.from_preset("paper").sac_gamma == 0.99  # the paper's table
+    with pytest.raises(ValueError, match="TrainConfig.low_level_gamma must be in"):
+        TrainConfig(low_level_gamma=1.5)
