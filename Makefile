@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hrlsac demo
+	$(BIN)/hrlsac mission replay missions/library/demo.yaml --policy policies/pretrained/hrl-sac.pt
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

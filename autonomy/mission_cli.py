@@ -36,6 +36,8 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
         else:
             sub.add_argument("--connect", required=True,
                              help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
+            sub.add_argument("--backend", choices=("pymavlink", "mavsdk"), default="pymavlink",
+                             help="MAVLink client: pymavlink (records a tlog) or MAVSDK (Offboard.set_velocity_ned)")
     return parser
 
 
@@ -99,25 +101,34 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     from autonomy.search_pilot import SearchPilot
     from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
 
+    clock = WallClock()
+    out.mkdir(parents=True, exist_ok=True)
+    tlog = None
     try:
-        connection = open_connection(args.connect)
+        if args.backend == "mavsdk":
+            from autonomy.mavsdk_link import MavsdkLink
+
+            link = MavsdkLink(args.connect, clock.now)
+        else:
+            connection = open_connection(args.connect)
+            tlog = TlogRecorder(out / TLOG)
+            link = VehicleLink(connection, clock.now, tlog)
     except LinkError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    out.mkdir(parents=True, exist_ok=True)
-    clock = WallClock()
-    tlog = TlogRecorder(out / TLOG)
     say = (lambda text: None) if args.quiet else print
-    runner = MissionRunner(mission, SearchPilot(mission, policy, args.seed),
-                           VehicleLink(connection, clock.now, tlog), clock,
+    runner = MissionRunner(mission, SearchPilot(mission, policy, args.seed), link, clock,
                            PoseEstimator(home=mission.scenario.home), threaded_policy=True, say=say)
     try:
         report = runner.run()
     finally:
-        tlog.close()
-        connection.close()
+        if tlog is not None:
+            tlog.close()
+            connection.close()
+        else:
+            link.close()
     report.update(policy=str(policy.path), policy_sha256=policy.sha256, seed=args.seed, clock="wall",
-                  connect=args.connect, tlog_messages=tlog.messages)
+                  connect=args.connect, backend=args.backend, tlog_messages=tlog.messages if tlog else None)
     write_json_atomic(out / REPORT, report)
     print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "
           f"report: {out / REPORT}")

@@ -222,21 +222,18 @@ class MissionRunner:
 
     def _connect(self) -> None:
         self.wait_until(lambda: self.link.discovered, self.config.connect_timeout_s, "waiting for the vehicle")
-        beat = self.link.latest["HEARTBEAT"]
-        self._record("PREFLIGHT", f"vehicle {self.link.target_system}/{self.link.target_component} "
-                                  f"({mavlink.enums['MAV_AUTOPILOT'][beat.autopilot].name})")
+        self._record("PREFLIGHT", self.link.vehicle_description())
         self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0)
 
     def _preflight(self) -> None:
-        self.wait_until(lambda: self.estimator.converged and "HOME_POSITION" in self.link.latest,
+        self.wait_until(lambda: self.estimator.converged and self.link.home_altitude_amsl() is not None,
                         self.config.preflight_timeout_s, "waiting for a converged position estimate and home")
         self._record("ARM", "pose estimate converged, home known")
 
     def _arm_and_take_off(self) -> None:
         self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
         self._record("TAKEOFF", "armed")
-        home = self.link.latest["HOME_POSITION"]
-        target_amsl = home.altitude / 1000.0 + self.mission.flight.altitude_m
+        target_amsl = self.link.home_altitude_amsl() + self.mission.flight.altitude_m
         self.command(mavlink.MAV_CMD_NAV_TAKEOFF, math.nan, 0, 0, math.nan, math.nan, math.nan, target_amsl,
                      what="takeoff")
         self.wait_until(lambda: self._altitude_m() >= self.mission.flight.altitude_m - 1.5
@@ -300,9 +297,8 @@ class MissionRunner:
         elif now - max(self._last_decision_s, self.transitions[-1]["time_s"]) > self.config.policy_stall_rtl_s:
             self._event("failsafe", f"no policy decision for {self.config.policy_stall_rtl_s:g} s: RTL")
             self.search_end = "policy stalled"
-        elif (status := self.link.latest.get("SYS_STATUS")) is not None \
-                and 0 <= status.battery_remaining <= self.config.low_battery_pct:
-            self._event("failsafe", f"battery at {status.battery_remaining} %: RTL")
+        elif (battery := self.link.battery_percent()) is not None and battery <= self.config.low_battery_pct:
+            self._event("failsafe", f"battery at {battery:g} %: RTL")
             self.search_end = "low battery"
         elif self.link.flight_mode != "OFFBOARD":
             self._event("failsafe", f"the vehicle left OFFBOARD (now {self.link.flight_mode})")

@@ -150,6 +150,21 @@ class VehicleLink:
         beat = self.latest.get("HEARTBEAT")
         return bool(beat is not None and beat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
+    def vehicle_description(self) -> str:
+        beat = self.latest["HEARTBEAT"]
+        return (f"vehicle {self.target_system}/{self.target_component} "
+                f"({mavlink.enums['MAV_AUTOPILOT'][beat.autopilot].name})")
+
+    def home_altitude_amsl(self) -> float | None:
+        """Home's altitude above mean sea level (m), from HOME_POSITION; None before it arrived."""
+        home = self.latest.get("HOME_POSITION")
+        return None if home is None else home.altitude / 1000.0
+
+    def battery_percent(self) -> float | None:
+        """Battery remaining (SYS_STATUS), None if unknown."""
+        status = self.latest.get("SYS_STATUS")
+        return None if status is None or status.battery_remaining < 0 else float(status.battery_remaining)
+
     def ack_for(self, command: int, since_s: float) -> CommandAck | None:
         """The first ACK of ``command`` received at or after ``since_s``."""
         return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
