@@ -250,38 +250,9 @@ def test_mission_run_refuses_a_bad_connection_url(policy, mission_file):
     assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.stderr
 
 
-@pytest.mark.slow
-def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path):
-    """A short mission, end to end: ``hrlsac sitl`` as its own process, the runner over UDP, wall clock."""
-    mission = small_mission(altitude_m=10.0, max_steps=10)
-    path = tmp_path / "short.yaml"
-    save_mission(mission, path)
-    home = mission.scenario.home
-    api_port, api_remote = free_udp_ports(2)
-    sitl = subprocess.Popen([*HRLSAC, "sitl", "--api-port", str(api_port), "--api-remote", str(api_remote),
-                             "--gcs-remote", "0", "--home", f"{home.lat_deg},{home.lon_deg},{home.alt_m}",
-                             "--param", "RTL_RETURN_ALT=12", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--policy", str(policy.path),
-                                 "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out")],
-                                capture_output=True, text=True, timeout=240)
-    finally:
-        sitl.send_signal(signal.SIGINT)
-        sitl.communicate(timeout=10)
-    assert result.returncode == 0, result.stdout + result.stderr
-    report = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert [t["to"] for t in report["transitions"]] == ALL_STATES
-    assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
-    setpoints = ours(read_tlog(tmp_path / "out" / "flight.tlog"), "SET_POSITION_TARGET_LOCAL_NED")
-    assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
-
-
-@pytest.mark.slow
-@pytest.mark.mavsdk
-def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, tmp_path):
-    """The same short mission as above, with MAVSDK (Action, Offboard.set_velocity_ned, Telemetry) as the client."""
-    pytest.importorskip("mavsdk.asyncio")
+def fly_against_sitl_process(policy, tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess, str, dict]:
+    """A short mission flown by ``hrlsac mission run`` against ``hrlsac sitl`` as its own process, over real UDP in
+    real time; returns the command's result, the vehicle's log and the mission report."""
     mission = small_mission(altitude_m=10.0, max_steps=10)
     path = tmp_path / "short.yaml"
     save_mission(mission, path)
@@ -293,13 +264,30 @@ def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, t
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--policy", str(policy.path),
-                                 "--connect", f"udpin:127.0.0.1:{api_remote}", "--backend", "mavsdk",
-                                 "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=240)
+                                 "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out"),
+                                 *extra], capture_output=True, text=True, timeout=240)
     finally:
         sitl.send_signal(signal.SIGINT)
         vehicle_log, _ = sitl.communicate(timeout=10)
     assert result.returncode == 0, result.stdout + result.stderr
-    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    return result, vehicle_log, json.loads((tmp_path / "out" / "report.json").read_text())
+
+
+@pytest.mark.slow
+def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path):
+    _, _, report = fly_against_sitl_process(policy, tmp_path)
+    assert [t["to"] for t in report["transitions"]] == ALL_STATES
+    assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
+    setpoints = ours(read_tlog(tmp_path / "out" / "flight.tlog"), "SET_POSITION_TARGET_LOCAL_NED")
+    assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
+
+
+@pytest.mark.slow
+@pytest.mark.mavsdk
+def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, tmp_path):
+    """The same short mission, with MAVSDK (Action, Offboard.set_velocity_ned, Telemetry) as the client."""
+    pytest.importorskip("mavsdk.asyncio")
+    result, vehicle_log, report = fly_against_sitl_process(policy, tmp_path, "--backend", "mavsdk")
     assert [t["to"] for t in report["transitions"]] == ALL_STATES and report["backend"] == "mavsdk"
     assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20  # at least the 1.2 s lead
     assert "mode OFFBOARD" in vehicle_log and "Task was destroyed" not in result.stderr
