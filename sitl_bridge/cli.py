@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 
@@ -87,6 +88,10 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
         print(f"  GCS link  udp {args.host}:{args.gcs_port} -> {args.host}:{args.gcs_remote}"
               f"   QGroundControl / MAVProxy: --master=udpin:0.0.0.0:{args.gcs_remote}")
     print("Ctrl-C stops.", flush=True)
+    # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and Python then
+    # installs no KeyboardInterrupt handler: install it, and treat SIGTERM (service managers, kill) the same.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     server.start()
     try:
         while server.running:
