@@ -258,7 +258,11 @@ class MissionRunner:
                 pose = self.estimator.predict_to(now)
                 self.trajectory.append((round(now, 3), float(pose.position_ned[0]), float(pose.position_ned[1])))
                 self.worker.submit(pose.position_ned[:2].copy(), now)
+                # One period after the scheduled decision; a decision that came late (slow policy) skips the
+                # missed periods instead of a burst of back-to-back decisions, each counted as a full step.
                 next_decision += period
+                if next_decision <= now:
+                    next_decision = now + period
             decision = self.worker.poll(now)
             if decision is not None:
                 self._apply(decision, now)

@@ -165,6 +165,14 @@ def test_the_stream_keeps_its_rate_while_a_slow_policy_computes(policy, tmp_path
     assert report["failsafes"] == [] and report["transitions"][-1]["to"] == "DONE"
 
 
+def test_decisions_late_by_more_than_a_period_skip_the_missed_steps(policy, tmp_path):
+    # 1.5 s per decision with a 1 s step: one decision every 2 s (no catch-up burst), 40 steps over ~80 s.
+    report = replay_mission(small_mission(), policy, seed=5, out=tmp_path, video=False, simulated_policy_s=1.5)
+    times = np.array([t for t, _, _ in report["trajectory"]])
+    assert np.all(np.diff(times) >= 1.5 - 1e-6)
+    assert report["search_end"] == "step limit" and report["steps"] == FLIGHT.max_steps
+
+
 def test_a_stalled_policy_gets_zero_velocity_then_rtl(policy, tmp_path):
     report = replay_mission(small_mission(), policy, seed=5, out=tmp_path, video=False, simulated_policy_s=30.0)
     assert report["search_end"] == "policy stalled"
