@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from autonomy.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
+
 DEFAULT_OUT = Path("mission-output")
 
 
@@ -30,9 +32,18 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
         sub.add_argument("--seed", type=int, default=0,
                          help="seed of the simulated camera's detections (and of the vehicle's sensor noise)")
         sub.add_argument("--quiet", action="store_true", help="print only the summary")
+        sub.add_argument("--signing-key", metavar="FILE", default=None,
+                         help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything sent, drop wrongly "
+                              "signed or replayed messages" + (" (the simulated vehicle uses it too)"
+                                                               if name == "replay" else ""))
         if name == "replay":
             sub.add_argument("--episodes", type=int, default=1, help="fly seeds SEED .. SEED+EPISODES-1")
             sub.add_argument("--no-video", action="store_true", help="skip replay.mp4 (faster)")
+            add_pool_arguments(sub)
+            sub.add_argument("--link-faults", metavar="SPEC", default=None,
+                             help="inject link faults on the simulated clock, seeded by each episode's seed unless "
+                                  "seed=N is given, e.g. 'loss=0.1,latency_ms=50,jitter_ms=20,outage=30:2' (all keys: "
+                                  "docs/runner.md, Link faults)")
         else:
             sub.add_argument("--connect", required=True,
                              help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
@@ -46,37 +57,63 @@ def main(argv: list[str], prog: str = "hrlsac mission") -> int:
     name = f"{prog} {args.command}"
     from autonomy.policy import PolicyArtifactError, load_policy
     from missions.mission_file import MissionFileError, load_mission
+    from missions.signing import load_key_file
 
     try:
         mission = load_mission(args.mission)
         policy = load_policy(args.policy)
         if args.command == "replay" and not 1 <= args.episodes <= 100_000:
             raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
-    except (MissionFileError, PolicyArtifactError, ValueError) as exc:
+        if not 0 <= args.seed <= 2**32 - 1:  # numpy seeds the sensors and the camera with it
+            raise ValueError(f"--seed must be in [0, {2**32 - 1}], got {args.seed}")
+        if args.command == "run" and args.signing_key and args.backend == "mavsdk":
+            raise ValueError("--signing-key needs --backend pymavlink (MAVSDK's Python API cannot sign)")
+        args.key = load_key_file(args.signing_key) if args.signing_key else None
+        if getattr(args, "link_faults", None):
+            from sitl_bridge.faults import parse_link_faults  # replays only: a real flight has the real link's faults
+
+            args.faults = parse_link_faults(args.link_faults)
+        if args.command == "replay":
+            args.pool = pool_from_arguments(args)
+    except (MissionFileError, PolicyArtifactError, ValueError, WorkerPoolError) as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
     out = args.out or DEFAULT_OUT / (mission.name or Path(args.mission).stem)
+    try:
+        out.mkdir(parents=True, exist_ok=True)  # now: a bad --out is a usage error, not a failure after the flight
+    except OSError as exc:
+        print(f"{name}: error: --out {out}: cannot create the folder ({exc.strerror or exc})", file=sys.stderr)
+        return 2
     if args.command == "replay":
         return _replay(mission, policy, args, out)
     return _run(mission, policy, args, out, name)
 
 
 def _replay(mission, policy, args, out: Path) -> int:
-    from autonomy.replay import replay_mission
+    from autonomy.parallel_replay import ReplayEpisode, replay_episodes
 
-    reports = []
+    # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
+    options = dict(signing_key=args.key, link_faults=getattr(args, "faults", None))
+    episodes = [ReplayEpisode(mission, args.policy, args.seed + episode,
+                              out if args.episodes == 1 else out / f"seed-{args.seed + episode:05d}",
+                              video=not args.no_video, narrate=args.episodes == 1 and not args.quiet, options=options)
+                for episode in range(args.episodes)]
+    finished = []
     started = time.perf_counter()
-    for episode in range(args.episodes):
-        seed = args.seed + episode
-        folder = out if args.episodes == 1 else out / f"seed-{seed:05d}"
-        say = print if (args.episodes == 1 and not args.quiet) else (lambda text: None)
-        report = replay_mission(mission, policy, seed=seed, out=folder, video=not args.no_video, say=say)
-        reports.append(report)
+
+    def show_progress(index: int, report: dict) -> None:
+        finished.append(report)
         if args.episodes > 1 and not args.quiet:
-            done = episode + 1
-            rate = sum(r["success"] for r in reports) / done
+            done = len(finished)
+            rate = sum(r["success"] for r in finished) / done
             print(f"\r[{'#' * (30 * done // args.episodes):<30}] {done}/{args.episodes} episodes  "
                   f"success {rate:.0%}  ({time.perf_counter() - started:.0f} s)", end="", file=sys.stderr)
+
+    try:
+        reports = replay_episodes(episodes, args.pool, show_progress)
+    except WorkerPoolError as exc:
+        print(f"hrlsac mission replay: error: {exc}", file=sys.stderr)
+        return 2
     if args.episodes > 1 and not args.quiet:
         print(file=sys.stderr)
     wall = time.perf_counter() - started
@@ -90,16 +127,18 @@ def _replay(mission, policy, args, out: Path) -> int:
         print(f"  search ended: {r['search_end']} after {r['steps']} decisions; victim detected: {detection}; "
               f"coverage {r['coverage_ratio']:.0%}; path {r['path_length_m']:.0f} m; "
               f"{r['setpoints_sent']} setpoints")
+        print(f"  outcome: {r['outcome']['outcome']} ({r['outcome']['reason']}); vehicle {r['outcome']['vehicle_end']}")
     print(f"  report: {out / 'report.json' if len(reports) == 1 else out}")
     return 0
 
 
 def _run(mission, policy, args, out: Path, name: str) -> int:
     from autonomy.estimator import PoseEstimator
-    from autonomy.recorder import REPORT, TLOG, TlogRecorder, write_json_atomic
+    from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
     from autonomy.runner import MissionRunner, WallClock
     from autonomy.search_pilot import SearchPilot
     from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
+    from missions.signing import wall_timestamp
 
     clock = WallClock()
     out.mkdir(parents=True, exist_ok=True)
@@ -112,13 +151,24 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
         else:
             connection = open_connection(args.connect)
             tlog = TlogRecorder(out / TLOG)
-            link = VehicleLink(connection, clock.now, tlog)
+            # A security warning is printed even with --quiet.
+            link = VehicleLink(connection, clock.now, tlog, signing_key=args.key, signing_timestamp=wall_timestamp,
+                               warn=print)
     except LinkError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except OverflowError as exc:  # from the socket module, for a port outside 0-65535 (not wrapped in a LinkError)
+        print(f"{name}: error: --connect {args.connect}: {exc}", file=sys.stderr)
+        return 2
     say = (lambda text: None) if args.quiet else print
+    facts = dict(policy=str(policy.path), policy_sha256=policy.sha256, seed=args.seed, clock="wall",
+                 connect=args.connect, backend=args.backend)
+    # Rewritten atomically while flying, "complete": false until the end: a killed run leaves its record.
+    partial = PartialReport(out / REPORT, lambda: {**runner.report(), **facts})
     runner = MissionRunner(mission, SearchPilot(mission, policy, args.seed), link, clock,
-                           PoseEstimator(home=mission.scenario.home), threaded_policy=True, say=say)
+                           PoseEstimator(home=mission.scenario.home), threaded_policy=True, say=partial.after(say),
+                           on_decision=partial.after(lambda decision: None))
+    partial.start()
     try:
         report = runner.run()
     finally:
@@ -127,9 +177,10 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
             connection.close()
         else:
             link.close()
-    report.update(policy=str(policy.path), policy_sha256=policy.sha256, seed=args.seed, clock="wall",
-                  connect=args.connect, backend=args.backend, tlog_messages=tlog.messages if tlog else None)
-    write_json_atomic(out / REPORT, report)
+    report.update(facts, tlog_messages=tlog.messages if tlog else None)
+    if getattr(link, "signing", None) is not None:
+        report["signing"] = {"runner": link.signing.summary()}
+    partial.finish(report)
     print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "
           f"report: {out / REPORT}")
     return 1 if any(event["event"] == "abort" for event in report["events"]) else 0

@@ -18,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import io
 import zipfile
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,6 +93,8 @@ def load_policy(path: Path | str) -> Policy:
     """Read, check and load an artifact written by ``hrlsac export``; raises :class:`PolicyArtifactError`."""
     path = Path(path)
     try:
+        if path.exists() and not (path.is_file() or path.is_dir()):  # a FIFO or /dev/zero would never end
+            raise PolicyArtifactError(f"{path}: not a regular file (a device, FIFO or socket?)")
         data = path.read_bytes()
     except FileNotFoundError:
         raise PolicyArtifactError(f"{path}: no such file") from None
@@ -128,24 +129,36 @@ def read_manifest(data: bytes, name: str) -> PolicyManifest:
         if data[-22:-18] != ZIP_END:
             raise zipfile.BadZipFile("no end record at the end")
         archive = zipfile.ZipFile(io.BytesIO(data))
-    except zipfile.BadZipFile:
-        raise PolicyArtifactError(f"{name}: truncated or damaged file (the zip archive has no valid end "
-                                  "record; copy the artifact again)") from None
+    except Exception as exc:  # BadZipFile, but a damaged header also gives UnicodeDecodeError, struct.error, ...
+        reason = ("the zip archive has no valid end record" if isinstance(exc, zipfile.BadZipFile)
+                  else f"its zip directory is unreadable: {one_line(exc)}")
+        raise PolicyArtifactError(f"{name}: truncated or damaged file ({reason}; copy the artifact again)") from None
     members = [m for m in archive.namelist() if m.split("/")[-2:] == ["extra", MANIFEST_FILE]]
     if len(members) != 1:
-        raise PolicyArtifactError(f"{name}: not a policy artifact (no {MANIFEST_FILE} inside; a plain "
-                                  "TorchScript or torch.export file?)")
+        raise PolicyArtifactError(f"{name}: not a policy artifact (no {MANIFEST_FILE} inside; "
+                                  f"{_what_archive(archive.namelist())})")
     try:
         damaged = archive.testzip()  # reads every member and checks its CRC-32
-    except (zlib.error, EOFError, OSError) as exc:
-        raise PolicyArtifactError(f"{name}: corrupt file ({exc}; copy the artifact again)") from None
+        text = archive.read(members[0]) if damaged is None else b""
+    except Exception as exc:  # zlib.error, EOFError, BadZipFile, NotImplementedError (a flipped method byte), ...
+        raise PolicyArtifactError(f"{name}: corrupt file ({one_line(exc)}; copy the artifact again)") from None
     if damaged is not None:
         raise PolicyArtifactError(f"{name}: corrupt file (checksum mismatch in {damaged}; copy the artifact "
                                   "again)")
     try:
-        return PolicyManifest.from_json(archive.read(members[0]))
+        return PolicyManifest.from_json(text)
     except (ValueError, TypeError) as exc:
         raise PolicyArtifactError(f"{name}: {exc}") from None
+
+
+def _what_archive(members: list[str]) -> str:
+    """A guess at what a zip without a manifest is, with what to do about it."""
+    if any("/code/" in m or m.endswith("/constants.pkl") for m in members):
+        return "a plain TorchScript file, not written by 'hrlsac export'"
+    if any(m.endswith("/data.pkl") for m in members):
+        return ("a torch.save file, e.g. a training checkpoint: write its policy with "
+                "'hrlsac export CHECKPOINT -o policy.pt'")
+    return "a plain TorchScript or torch.export file?"
 
 
 def check_compatible(manifest: PolicyManifest, name: str) -> None:

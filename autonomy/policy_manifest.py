@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM, OBSERVATION_LAYOUT_VERSION, layout_description
 
@@ -136,12 +136,52 @@ class PolicyManifest:
         return manifest
 
 
-_SIMPLE_TYPES = {"int": int, "str": str, "int | None": (int, type(None))}  # annotations, as strings
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_list_of(kind: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda value: isinstance(value, list) and all(kind(item) for item in value)
+
+
+def _is_dict_of(kind: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda value: isinstance(value, dict) and all(isinstance(k, str) and kind(v) for k, v in value.items())
+
+
+def _is(*types: type) -> Callable[[Any], bool]:
+    return lambda value: isinstance(value, types) and not isinstance(value, bool)
+
+
+def _anything(value: Any) -> bool:
+    return True
+
+
+# Field annotation (a string, as `from __future__ import annotations` leaves it) -> JSON shape check and its
+# name in messages. Every annotation of the manifest's dataclasses is here: a manifest that parses has the
+# types the runtime and `hrlsac policy info` use, whatever the file says (a damaged or hand-edited manifest
+# must be refused, not crash the reader).
+_SHAPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "int": (_is(int), "an integer"),
+    "str": (_is(str), "a string"),
+    "int | None": (lambda value: value is None or _is(int)(value), "an integer or null"),
+    "tuple[str, ...]": (_is_list_of(_is(str)), "a list of strings"),
+    "tuple[float, ...]": (_is_list_of(_is_number), "a list of numbers"),
+    "tuple[dict, ...]": (_is_list_of(_is(dict)), "a list of objects"),
+    "tuple[GoalSpec, ...]": (_is(list), "a list"),
+    "dict[str, str]": (_is_dict_of(_is(str)), "an object of strings"),
+    "dict[str, Any]": (_is_dict_of(_anything), "an object"),
+    "dict[str, Any] | str": (lambda value: _is(str)(value) or _is_dict_of(_is(dict))(value),
+                             "an object of objects (split -> metrics) or a string"),
+    "ObservationSpec": (_is(dict), "an object"),
+    "ActionSpec": (_is(dict), "an object"),
+    "SourceCheckpoint": (_is(dict), "an object"),
+}
 _NESTED = {"observation": ObservationSpec, "action": ActionSpec, "source_checkpoint": SourceCheckpoint}
 
 
 def _build(cls: type, data: Any, where: str):
-    """``cls`` from a JSON object: nested dataclasses rebuilt, lists as tuples, unknown keys ignored."""
+    """``cls`` from a JSON object: types checked, nested dataclasses rebuilt, lists as tuples, unknown keys
+    ignored. A ValueError names the first field that is missing or of the wrong type."""
     if not isinstance(data, dict):
         raise ValueError(f"{where} is not a JSON object")
     values = {}
@@ -149,9 +189,9 @@ def _build(cls: type, data: Any, where: str):
         if field.name not in data:
             raise ValueError(f"{where} is missing the field {field.name!r}")
         value = data[field.name]
-        expected = _SIMPLE_TYPES.get(field.type)
-        if expected is not None and (not isinstance(value, expected) or isinstance(value, bool)):
-            raise ValueError(f"{where}.{field.name} must be {field.type}, got {value!r}")
+        check, expected = _SHAPES[field.type]
+        if not check(value):
+            raise ValueError(f"{where}.{field.name} must be {expected}, got {_brief_json(value)}")
         if field.name in _NESTED:
             value = _build(_NESTED[field.name], value, f"{where}.{field.name}")
         elif field.name == "goals":
@@ -159,7 +199,27 @@ def _build(cls: type, data: Any, where: str):
         elif isinstance(value, list):
             value = tuple(value)
         values[field.name] = value
+    if cls is ActionSpec and len({len(values[name]) for name in ("names", "low", "high", "units")}) != 1:
+        raise ValueError(f"{where}: names, low, high and units must have the same length")
+    if cls is ObservationSpec:
+        for i, item in enumerate(values["fields"]):
+            _build(_ObservationField, item, f"{where}.fields[{i}]")
     return cls(**values)
+
+
+@dataclass(frozen=True)
+class _ObservationField:
+    """The shape of one entry of ``ObservationSpec.fields`` (checked on reading; the entries stay dicts)."""
+
+    name: str
+    offset: int
+    size: int
+    description: str
+
+
+def _brief_json(value: Any, limit: int = 60) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= limit else f"{text[:limit - 3]}..."
 
 
 def summary_lines(manifest: PolicyManifest) -> list[str]:
@@ -184,7 +244,10 @@ def evaluation_summary(evaluation: dict[str, Any] | str) -> str:
     """One line per manifest: success, reward and coverage of each evaluated split, or "not evaluated"."""
     if not isinstance(evaluation, dict) or not evaluation:
         return NOT_EVALUATED
-    nan = float("nan")
-    return "; ".join(f"{split} ({m.get('episodes')} episodes): success {m.get('success_rate', nan):.1%}, "
-                     f"reward {m.get('reward_mean', nan):.1f}, coverage {m.get('coverage_mean', nan):.1%}"
+    def number(metrics: dict, key: str, spec: str) -> str:  # a missing or non-numeric metric shows as n/a
+        value = metrics.get(key) if isinstance(metrics, dict) else None
+        return format(value, spec) if _is_number(value) else "n/a"
+
+    return "; ".join(f"{split} ({number(m, 'episodes', 'g')} episodes): success {number(m, 'success_rate', '.1%')}, "
+                     f"reward {number(m, 'reward_mean', '.1f')}, coverage {number(m, 'coverage_mean', '.1%')}"
                      for split, m in evaluation.items())

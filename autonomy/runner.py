@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from autonomy.estimator import PoseEstimator
 from autonomy.search_pilot import Decision, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
-from autonomy.vehicle_link import VehicleLink
+from autonomy.vehicle_link import VehicleLink, enum_name
 from missions.mission import Mission
 from missions.validation import check_fields
 
@@ -171,10 +171,7 @@ class MissionRunner:
     def tick(self) -> None:
         """One control tick: telemetry in, heartbeat and setpoints out. States call it while they wait."""
         self.clock.advance()
-        for msg in self.link.tick():
-            kind = msg.get_type()
-            if kind == "GLOBAL_POSITION_INT":
-                self.estimator.update_global_position_int(msg)
+        receive_telemetry(self.link, self.estimator)
         self.streamer.tick(self.clock.now())
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str) -> None:
@@ -199,7 +196,7 @@ class MissionRunner:
             if result == mavlink.MAV_RESULT_ACCEPTED:
                 return
             texts = "; ".join(self.link.status_texts[-2:])
-            raise MissionAborted(f"{what}: {name} refused ({mavlink.enums['MAV_RESULT'][result].name})"
+            raise MissionAborted(f"{what}: {name} refused ({enum_name('MAV_RESULT', result)})"
                                  + (f": {texts}" if texts else ""))
         raise MissionAborted(f"{what}: no COMMAND_ACK for {name} after {self.config.command_retries} attempts")
 
@@ -379,6 +376,16 @@ class MissionRunner:
             "events": self.events,
             "estimator": self.estimator.counters(),
         }
+
+
+def receive_telemetry(link: VehicleLink, estimator: PoseEstimator) -> list:
+    """Everything the vehicle sent since the last call, its positions fused into the estimator (the runner's whole
+    receive path: :mod:`tests.test_fuzz_mavlink` feeds it garbage)."""
+    messages = link.tick()
+    for msg in messages:
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            estimator.update_global_position_int(msg)
+    return messages
 
 
 class WallClock:

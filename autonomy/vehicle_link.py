@@ -9,7 +9,9 @@ connection instead. :class:`VehicleLink` then does what every companion computer
 * keeps what the runner reads: the latest message of each type, the flight mode (PX4 custom modes, decoded by
   pymavlink), the time of the last vehicle message (telemetry loss), COMMAND_ACKs and STATUSTEXTs;
 * sends COMMAND_LONG, SET_MESSAGE_INTERVAL and velocity setpoints;
-* hands every message, both directions, to an optional recorder (the tlog) with the run's clock.
+* hands every message, both directions, to an optional recorder (the tlog) with the run's clock;
+* with a signing key, signs everything it sends (timestamps from the run's clock), drops wrongly signed and
+  replayed messages, and warns once when the vehicle's messages arrive unsigned (see missions.signing).
 
 It does not wait for anything itself: the runner owns time (simulated in lockstep, real otherwise) and waits by
 ticking; see ``autonomy.runner``.
@@ -17,6 +19,7 @@ ticking; see ``autonomy.runner``.
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections import deque
 from dataclasses import dataclass, field
@@ -26,9 +29,11 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand, setpoint_message_args
+from missions.signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_timestamp
 
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 1.0
+MAX_STATUS_TEXTS = 100  # the runner quotes the last two; a chatty or hostile vehicle must not grow memory
 _URL = re.compile(r"^(udpin|udpout|tcp):[^:]+:\d{1,5}$")
 _NOT_A_VEHICLE = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
 
@@ -41,6 +46,13 @@ class Recorder(Protocol):
     def record(self, time_s: float, data: bytes) -> None: ...
 
 
+def enum_name(enum: str, value: int) -> str:
+    """The name of a MAVLink enum value; the number itself for values this dialect does not know (a vehicle may
+    send anything: a message from a newer or broken autopilot must not crash the runner)."""
+    entry = mavlink.enums[enum].get(value)
+    return entry.name if entry is not None else f"{enum} {value}"
+
+
 def open_connection(url: str, system_id: int = 1):
     """A pymavlink connection for ``url`` as the companion computer (``system_id``, component 191)."""
     target = url
@@ -50,6 +62,9 @@ def open_connection(url: str, system_id: int = 1):
     elif not (_URL.match(url) or url.startswith("/dev/") or url.upper().startswith("COM")):
         raise LinkError(f"cannot use connection {url!r}: write udpin:HOST:PORT (listen, e.g. udpin:0.0.0.0:14540 "
                         "for PX4 SITL), udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
+    # MAVLink 2 from the first byte. Otherwise pymavlink starts in MAVLink 1 and, on the vehicle's first MAVLink 2
+    # frame, replaces its encoder with a new one, dropping whatever signing was set up on the old one.
+    os.environ.setdefault("MAVLINK20", "1")
     try:
         return mavutil.mavlink_connection(target, source_system=system_id, source_component=COMPANION_COMPONENT,
                                           dialect="common", autoreconnect=True)
@@ -79,11 +94,28 @@ class VehicleLink:
     acks: deque = field(default_factory=lambda: deque(maxlen=64))
     status_texts: list[str] = field(default_factory=list)
     sent_heartbeats: int = 0
+    signing_key: bytes | None = field(default=None, repr=False)
+    """MAVLink 2 signing secret (32 bytes); None: send unsigned, accept everything."""
+    signing_timestamp: Callable[[], int] | None = None
+    """Signing clock (10 us units since 2015); default: ``clock`` from the MAVLink epoch (lockstep replays).
+    Flights in real time pass missions.signing.wall_timestamp, as real autopilots expect."""
+    warn: Callable[[str], None] = lambda text: None
+    """Where warnings go (the runner's log)."""
+    signing: LinkSigning | None = field(default=None, init=False)
+    _warned_unsigned: bool = field(default=False, init=False)
+    _vehicle_signs: bool = field(default=False, init=False)
     _next_heartbeat_s: float = -math.inf  # the first tick sends and anchors the 1 Hz schedule
 
     def __post_init__(self) -> None:
         self.conn.mav.set_send_callback(self._on_send)
         self.boot_s = self.clock()
+        if self.signing_key is not None:
+            # The companion computer accepts unsigned messages from a vehicle that does not sign (with a warning):
+            # refusing them would only lose the vehicle, and what we send is signed, so the vehicle can refuse
+            # forged commands. Once a signed message arrived, unsigned ones are a downgrade and refused.
+            self.signing = LinkSigning(self.signing_key, self.signing_timestamp or simulated_timestamp(self.clock),
+                                       allow_unsigned=lambda msg_id: not self._vehicle_signs)
+            self.signing.install(self.conn.mav)
 
     # ------------------------------------------------------------------ time and housekeeping
     @property
@@ -91,12 +123,19 @@ class VehicleLink:
         """Milliseconds since this link started, for the time_boot_ms field of what we send."""
         return int(round((self.clock() - self.boot_s) * 1000.0)) & 0xFFFFFFFF
 
+    @property
+    def _mav(self):
+        """The connection's encoder, signing installed: pymavlink replaces its encoder when it switches protocol."""
+        if self.signing is not None:
+            self.signing.install(self.conn.mav)
+        return self.conn.mav
+
     def tick(self) -> list:
         """Receive everything waiting and send the heartbeat when due; returns the messages received."""
         now = self.clock()
         if now + 1e-9 >= self._next_heartbeat_s:
-            self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
-                                         0, 0, mavlink.MAV_STATE_ACTIVE)
+            self._mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
+                                     0, 0, mavlink.MAV_STATE_ACTIVE)
             self.sent_heartbeats += 1
             self._next_heartbeat_s += HEARTBEAT_PERIOD_S
             if self._next_heartbeat_s <= now:
@@ -105,30 +144,60 @@ class VehicleLink:
         while (msg := self.conn.recv_msg()) is not None:
             if msg.get_type() == "BAD_DATA":
                 continue
+            self._forget_pymavlink_state(msg)
             if self.recorder is not None:
                 self.recorder.record(now, bytes(msg.get_msgbuf()))
-            if self._accept(msg, now):
+            verdict = self._signing_verdict(msg)
+            if verdict is not None and self._accept(msg, now):
                 received.append(msg)
+                if verdict in (UNSIGNED, MAVLINK1) and not self._warned_unsigned:
+                    self._warned_unsigned = True
+                    self.warn(f"warning: signing is on but the vehicle's messages arrive unsigned (first: "
+                              f"{msg.get_type()}); they are not authenticated: give the vehicle the same key")
         return received
+
+    def _signing_verdict(self, msg) -> str | None:
+        """The signing verdict of a received message: None when rejected (wrong key, replayed, or unsigned once the
+        vehicle has signed), "" without signing."""
+        if self.signing is None:
+            return ""
+        accepted, verdict = self.signing.admit(msg.get_msgbuf(), msg.get_msgId(), msg.get_type())
+        if verdict == SIGNED:
+            self._vehicle_signs = True
+        return verdict if accepted else None
 
     def _accept(self, msg, now: float) -> bool:
         """Keep the vehicle's messages (discovering it from its first autopilot heartbeat)."""
         source = msg.get_srcSystem()
         if self.target_system is None:
+            # The autopilot is component 1 (PX4 and ArduPilot): a heartbeat from another component (a ground
+            # station, a camera, a fuzzer's odd frame) must not become "the vehicle".
             if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID \
-                    or msg.type in _NOT_A_VEHICLE:
+                    or msg.type in _NOT_A_VEHICLE or msg.get_srcComponent() != mavlink.MAV_COMP_ID_AUTOPILOT1:
                 return False
             self.target_system, self.target_component = source, msg.get_srcComponent()
             self.conn.mav.srcSystem = source  # a companion computer shares its vehicle's system id
         if source != self.target_system:
             return False
-        self.latest[msg.get_type()] = msg
+        if msg.get_msgId() != mavlink.MAVLINK_MSG_ID_UNKNOWN:  # 16 million possible ids: keep only known types
+            self.latest[msg.get_type()] = msg
         self.last_vehicle_message_s = now
         if msg.get_type() == "COMMAND_ACK":
             self.acks.append(CommandAck(msg.command, msg.result, now))
         elif msg.get_type() == "STATUSTEXT":
             self.status_texts.append(msg.text)
+            del self.status_texts[:-MAX_STATUS_TEXTS]
         return True
+
+    def _forget_pymavlink_state(self, msg) -> None:
+        """pymavlink's connection keeps the last message of every type per system and every parameter it hears;
+        garbage (any frame with an unknown id is "decoded": its CRC cannot be checked) and hostile PARAM_VALUEs
+        would grow these without bound. The runner uses neither: drop them."""
+        if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_UNKNOWN:
+            for state in getattr(self.conn, "sysid_state", {}).values():
+                state.messages.pop(msg.get_type(), None)
+        elif msg.get_type() == "PARAM_VALUE":
+            getattr(self.conn, "param_state", {}).clear()
 
     def _on_send(self, msg) -> None:
         if self.recorder is not None:
@@ -153,7 +222,7 @@ class VehicleLink:
     def vehicle_description(self) -> str:
         beat = self.latest["HEARTBEAT"]
         return (f"vehicle {self.target_system}/{self.target_component} "
-                f"({mavlink.enums['MAV_AUTOPILOT'][beat.autopilot].name})")
+                f"({enum_name('MAV_AUTOPILOT', beat.autopilot)})")
 
     def home_altitude_amsl(self) -> float | None:
         """Home's altitude above mean sea level (m), from HOME_POSITION; None before it arrived."""
@@ -177,12 +246,12 @@ class VehicleLink:
 
     def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
         padded = tuple(params) + (0.0,) * (7 - len(params))
-        self.conn.mav.command_long_send(*self._target(), command, confirmation, *padded)
+        self._mav.command_long_send(*self._target(), command, confirmation, *padded)
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
         self.send_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, 1e6 / rate_hz))
 
     def send_velocity(self, command: VelocityCommand, now_s: float) -> None:
         del now_s  # the stream's schedule; the message carries our boot time
-        self.conn.mav.set_position_target_local_ned_send(
+        self._mav.set_position_target_local_ned_send(
             *setpoint_message_args(command, self.time_boot_ms, *self._target()))

@@ -80,7 +80,8 @@ def _info(args: argparse.Namespace) -> int:
     unknown = ", ".join(f"{name} {n}" for name, n in sorted(summary.unknown_classes.items()))
     print(f"skipped: {summary.skipped_lines} malformed label line(s); "
           f"{sum(summary.unknown_classes.values())} box(es) of unmapped classes{f' ({unknown})' if unknown else ''}; "
-          f"{total_images - total_scenarios} image(s) without a person/swimmer/life_jacket (no scenario)")
+          f"{total_images - total_scenarios} image(s) without a person/swimmer/life_jacket (no scenario); "
+          f"{summary.orphan_labels} label file(s) without an image; {summary.missing_images} listed image(s) missing")
     for problem in summary.problems:
         print(f"  {problem}")
     print(f"Read in {time.perf_counter() - started:.1f} s.")

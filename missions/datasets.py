@@ -38,6 +38,7 @@ import yaml
 from missions.geodesy import GeoPoint
 from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay,
                                Weather)
+from missions.validation import brief
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 """Split names, in reporting order."""
@@ -147,6 +148,10 @@ class LoadStats:
     """Dataset class name -> number of boxes skipped because the class maps to no category."""
     images_without_scenario: dict[str, int] = field(default_factory=dict)
     """Split -> images the last :meth:`YoloDataset.scenarios` call skipped (no usable primary target)."""
+    missing_images: int = 0
+    """Entries of a ``.txt`` image list whose file does not exist (left out of the split)."""
+    orphan_labels: int = 0
+    """Label files beside a split's image folder with no image of that name (their boxes are unusable)."""
 
     def problem(self, message: str, skipped_line: bool = True) -> None:
         """Record a problem; ``skipped_line`` counts it as a skipped label line."""
@@ -170,6 +175,10 @@ class DatasetSummary:
     """Split -> images with a primary candidate, i.e. images that yield a scenario."""
     skipped_lines: int = 0
     unknown_classes: dict[str, int] = field(default_factory=dict)
+    missing_images: int = 0
+    """Listed images that do not exist (see LoadStats)."""
+    orphan_labels: int = 0
+    """Label files without an image (see LoadStats)."""
     problems: list[str] = field(default_factory=list)
     seconds: float = 0.0
     """How long making or reading the dataset took."""
@@ -190,10 +199,10 @@ def parse_label_line(text: str, class_ids: Collection[int], where: str) -> tuple
     """``"2 0.5 0.5 0.1 0.2"`` -> (2, 0.5, 0.5, 0.1, 0.2); raises DatasetError naming ``where`` (file:line)."""
     fields = text.split()
     if len(fields) != 5:
-        raise DatasetError(f"{where}: expected 5 fields 'class cx cy w h', got {len(fields)}: {text.strip()!r}")
+        raise DatasetError(f"{where}: expected 5 fields 'class cx cy w h', got {len(fields)}: {brief(text.strip())}")
     class_id = _int_field(fields[0])
     if class_id is None:
-        raise DatasetError(f"{where}: class id must be an integer, got {fields[0]!r}")
+        raise DatasetError(f"{where}: class id must be an integer, got {brief(fields[0])}")
     if class_id not in class_ids:
         ids = sorted(class_ids)
         raise DatasetError(f"{where}: class id {class_id} is out of range (the dataset has ids "
@@ -203,13 +212,13 @@ def parse_label_line(text: str, class_ids: Collection[int], where: str) -> tuple
         try:
             value = float(raw)
         except ValueError:
-            raise DatasetError(f"{where}: {label} must be a number, got {raw!r}") from None
+            raise DatasetError(f"{where}: {label} must be a number, got {brief(raw)}") from None
         if not (math.isfinite(value) and 0.0 <= value <= 1.0):
-            raise DatasetError(f"{where}: {label} must be in [0, 1] (normalised), got {raw}")
+            raise DatasetError(f"{where}: {label} must be in [0, 1] (normalised), got {brief(raw)}")
         values.append(value)
     cx, cy, w, h = values
     if w <= 0.0 or h <= 0.0:
-        raise DatasetError(f"{where}: w and h must be > 0, got w={fields[3]} h={fields[4]}")
+        raise DatasetError(f"{where}: w and h must be > 0, got w={brief(fields[3])} h={brief(fields[4])}")
     return class_id, cx, cy, w, h
 
 
@@ -249,6 +258,7 @@ class YoloDataset:
         self.names: dict[int, str] = self._class_names(names, config)
         self._sources: dict[str, list[Path]] = self._split_sources(config)
         self._items: dict[str, list[YoloItem]] = {}
+        self._missing_counted: set[str] = set()
 
         aliases = dict(CLASS_ALIASES)
         for name, category in (class_map or {}).items():
@@ -286,9 +296,8 @@ class YoloDataset:
         if names is None and "names" in config:
             names, where, from_yaml = config["names"], f"{self.yaml_path}: names", True
         elif names is None and (self.root / "classes.txt").is_file():
-            names = [line.strip() for line in (self.root / "classes.txt").read_text(encoding="utf-8").splitlines()
-                     if line.strip()]
             where = f"{self.root / 'classes.txt'}"
+            names = [line.strip() for line in _read_text(self.root / "classes.txt").splitlines() if line.strip()]
         if names is None:
             raise DatasetError(f"{self.root}: no class names (no data.yaml with names, no classes.txt, no names=)")
         if isinstance(names, Mapping):
@@ -365,9 +374,24 @@ class YoloDataset:
             elif source.suffix.lower() in IMAGE_SUFFIXES:
                 images.append(source)
             else:  # a .txt list of images, relative to the list's folder
-                lines = source.read_text(encoding="utf-8").splitlines()
-                images += [(source.parent / line.strip()) for line in lines if line.strip()]
+                listed = [source.parent / line.strip() for line in _read_text(source).splitlines() if line.strip()]
+                for number, path in enumerate(listed, start=1):
+                    if path.is_file():
+                        images.append(path)
+                    elif split not in self._missing_counted:  # image_paths may be asked twice; count once
+                        self.stats.missing_images += 1
+                        self.stats.problem(f"{source}:{number}: listed image {path} not found; left out",
+                                           skipped_line=False)
+        self._missing_counted.add(split)
         return sorted(set(images))
+
+    def orphan_labels(self, split: str) -> list[Path]:
+        """Label files in the label folders of a split's image folders that belong to no image of the split."""
+        expected = {label_path_for(path) for path in self.image_paths(split)}
+        folders = {label_path_for(source / "x.jpg").parent for source in self._sources.get(split, [])
+                   if source.is_dir()}
+        return sorted(label for folder in folders if folder.is_dir() for label in folder.rglob("*.txt")
+                      if label not in expected)
 
     # -- labels -------------------------------------------------------------------------------------------
 
@@ -376,6 +400,9 @@ class YoloDataset:
         split = SPLIT_ALIASES.get(split, split)
         if split not in self._items:
             self._items[split] = [self._load_item(split, path) for path in self.image_paths(split)]
+            for label in self.orphan_labels(split):
+                self.stats.orphan_labels += 1
+                self.stats.problem(f"{label}: label file without an image; ignored", skipped_line=False)
         return self._items[split]
 
     def _load_item(self, split: str, image_path: Path) -> YoloItem:
@@ -383,7 +410,7 @@ class YoloDataset:
         boxes: list[Box] = []
         if label_path.is_file():
             try:
-                lines = label_path.read_text(encoding="utf-8").splitlines()
+                lines = label_path.read_text(encoding="utf-8-sig").splitlines()  # -sig: a BOM is not part of the id
             except (OSError, UnicodeDecodeError) as exc:
                 if self.strict:
                     raise DatasetError(f"{label_path}: cannot read: {exc}") from None
@@ -449,8 +476,17 @@ class YoloDataset:
                         summary.boxes[box.category] += 1
         summary.skipped_lines = self.stats.skipped_lines
         summary.unknown_classes = dict(self.stats.unknown_classes)
+        summary.missing_images, summary.orphan_labels = self.stats.missing_images, self.stats.orphan_labels
         summary.problems = list(self.stats.problems)
         return summary
+
+
+def _read_text(path: Path) -> str:
+    """A dataset's text file (classes.txt, an image list); unreadable or not UTF-8 is a DatasetError naming it."""
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{path}: cannot read: {exc}") from None
 
 
 def image_seed(seed: int, split: str, index: int) -> int:

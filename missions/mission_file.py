@@ -42,7 +42,8 @@ Instead of the inline fields, a scenario can be a reference:
 Positions are metres north/east of home (local NED frame). Categories: person, boat, life_jacket, debris,
 floating_object, swimmer. Conditions: ``sea`` calm/moderate/rough, ``weather`` clear/cloudy/foggy/rainy,
 ``time_of_day`` dawn/day/dusk/night, ``visibility`` [0.3, 1], ``wind`` [0, 1] of 15 m/s, ``wind_direction_deg``
-the direction the wind blows towards. Beware YAML 1.1: ``1e3`` is a string there; write ``1000`` or ``1.0e3``.
+the direction the wind blows towards. Beware YAML 1.1: ``1e3`` and ``1.0e3`` are strings there; write ``1000`` or
+``1.0e+3`` (a dot and a signed exponent).
 
 Every problem is a :class:`MissionFileError` (a ValueError) with a one-line message naming the file, the
 field path and what is allowed, e.g. ``demo.yaml: flight.altitude_m: must be in [10, 120], got 500``.
@@ -57,11 +58,11 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
-import math
 import numbers
 import os
 import re
 import secrets
+import stat
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,7 @@ import yaml
 from missions.geodesy import GeoPoint
 from missions.mission import FlightSettings, Mission
 from missions.scenario import Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay, Weather
+from missions.validation import brief, is_finite
 
 LIBRARY_DIR = Path(__file__).resolve().parent / "library"
 """The bundled missions (demo.yaml, night_fog.yaml, ...)."""
@@ -84,6 +86,12 @@ _INLINE_REQUIRED = ("home", "area", "datum", "targets")
 _AREA_KEYS = tuple(f.name for f in dataclasses.fields(SearchArea))
 _ENUMS: dict[str, type[enum.Enum]] = {"SeaState": SeaState, "Weather": Weather, "TimeOfDay": TimeOfDay}
 _HEADER = "# Mission file, format described in missions/mission_file.py (written by save_mission).\n"
+MAX_SEED = 2**64 - 1
+"""Largest scenario or generator seed: numpy takes any size, but a longer one is a typo, not a seed."""
+MAX_FILE_BYTES = 1_000_000
+"""Larger files are refused unread: a mission is a few kB, and reading /dev/zero must not take forever."""
+# A float in YAML 1.1 needs a dot and a signed exponent; "1e3" or "1.0e3" stay strings (see the module notes).
+_NUMBER_LIKE = re.compile(r"^[-+]?(\d[\d_]*\.?\d*|\.\d+)[eE][-+]?\d+$")
 
 
 class MissionFileError(ValueError):
@@ -116,6 +124,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     path = Path(path)
     source = str(path)
     try:
+        _check_readable_size(path)
         text = path.read_text(encoding="utf-8-sig")  # -sig: tolerate the BOM some Windows editors add
     except FileNotFoundError:
         raise MissionFileError(source, "", "file not found") from None
@@ -124,11 +133,24 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     except UnicodeDecodeError as error:
         raise MissionFileError(source, "", f"not UTF-8 text (bad byte at offset {error.start})") from None
     except OSError as error:
-        raise MissionFileError(source, "", f"cannot read: {error.strerror}") from None
+        raise MissionFileError(source, "", f"cannot read: {error.strerror or error}") from None
+    except ValueError as error:  # e.g. a NUL character in the path
+        raise MissionFileError(source, "", f"not a usable file name ({error})") from None
     data = _parse_yaml(text, source)
     if data is None:
         raise MissionFileError(source, "", "empty file; a mission needs at least a 'scenario' section")
     return mission_from_dict(data, path.parent, source=source, default_name=path.stem)
+
+
+def _check_readable_size(path: Path) -> None:
+    """Refuse, before reading, what cannot be a mission file: a folder, a device or FIFO, a huge file."""
+    status = path.stat()  # FileNotFoundError and PermissionError are reported by the caller
+    if stat.S_ISDIR(status.st_mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(status.st_mode):
+        raise OSError("not a regular file (a device, FIFO or socket?); give a mission file")
+    if status.st_size > MAX_FILE_BYTES:
+        raise OSError(f"{status.st_size:,} bytes is far too large for a mission file (limit {MAX_FILE_BYTES:,})")
 
 
 def mission_from_dict(data: Mapping[str, Any], base_dir: str | os.PathLike[str], *,
@@ -198,6 +220,8 @@ class _MissionLoader(yaml.SafeLoader):
 def _parse_yaml(text: str, source: str) -> Any:
     try:
         return yaml.load(text, Loader=_MissionLoader)  # noqa: S506 - a SafeLoader subclass
+    except RecursionError:  # PyYAML composes nested nodes recursively
+        raise MissionFileError(source, "", "malformed YAML: nested too deeply to be a mission file") from None
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -205,6 +229,8 @@ def _parse_yaml(text: str, source: str) -> Any:
         raise MissionFileError(source, where, f"malformed YAML: {error.problem or error.context}{context}") from None
     except yaml.YAMLError as error:
         raise MissionFileError(source, "", f"malformed YAML: {error}") from None
+    except ValueError as error:  # an integer beyond Python's 4,300 digits; its advice on Python settings is cut
+        raise MissionFileError(source, "", f"malformed YAML: {str(error).split(';')[0]}") from None
 
 
 class _Flow(dict):
@@ -234,8 +260,10 @@ def _styled(value: Any, depth: int) -> Any:
 # ---------------------------------------------------------------------------------------------- readers
 
 def _join(path: str, key: object) -> str:
-    """Field path of ``key`` inside ``path`` (the top level has the empty path)."""
-    return f"{path}.{key}" if path else str(key)
+    """Field path of ``key`` inside ``path`` (the top level has the empty path); a key with a newline or another
+    unprintable character is quoted, so that the message stays one line."""
+    text = str(key) if str(key).isprintable() else repr(key)
+    return f"{path}.{text}" if path else text
 
 
 def _shown(value: Any) -> str:
@@ -248,7 +276,7 @@ def _shown(value: Any) -> str:
         return "a mapping"
     if isinstance(value, list):
         return "a list"
-    return repr(value)
+    return brief(value)
 
 
 def _mapping(value: Any, path: str, allowed: Sequence[str], required: Sequence[str] = (),
@@ -274,17 +302,22 @@ def _unknown_key(key: object, allowed: Sequence[str]) -> str:
 
 def _number(value: Any, path: str) -> float:
     # bool is an int subclass; 'altitude_m: yes' is a mistake, not 1 m.
+    if isinstance(value, str) and _NUMBER_LIKE.match(value.strip()):
+        raise _Invalid(path, f"must be a number, got the string {_shown(value)} (YAML 1.1 reads an exponent as a "
+                             "number only with a dot and a sign, e.g. 1.0e+3; or write the digits out)")
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise _Invalid(path, f"must be a number, got {_shown(value)}")
-    if not math.isfinite(value):
+    if not is_finite(value):
         raise _Invalid(path, f"must be a finite number, got {_shown(value)}")
     return value  # not float(value) yet: see _construct
 
 
-def _integer(value: Any, path: str, minimum: int | None = None) -> int:
-    allowed = "an integer" if minimum is None else f"an integer >= {minimum}"
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or \
-            (minimum is not None and value < minimum):
+def _integer(value: Any, path: str, minimum: int | None = None, maximum: int | None = None) -> int:
+    integer = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    too_big = integer and maximum is not None and value > maximum
+    allowed = (f"an integer <= {maximum}" if too_big else "an integer" if minimum is None
+               else f"an integer >= {minimum}")
+    if not integer or too_big or (minimum is not None and value < minimum):
         raise _Invalid(path, f"must be {allowed}, got {_shown(value)}")
     return int(value)
 
@@ -298,6 +331,10 @@ def _boolean(value: Any, path: str) -> bool:
 def _string(value: Any, path: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise _Invalid(path, f"must be a non-empty string, got {_shown(value)}")
+    try:
+        value.encode("utf-8")  # a lone surrogate ("\ud800" in YAML) would break every report and print later
+    except UnicodeEncodeError:
+        raise _Invalid(path, f"must be valid Unicode text, got {_shown(value)}") from None
     return value
 
 
@@ -428,7 +465,7 @@ def _inline(spec: dict[str, Any], path: str) -> Scenario:
     return _construct(Scenario, path, paths, details,
                       home=_construct(GeoPoint, f"{path}.home", **home), area=area, targets=targets,
                       obstacles=obstacles, conditions=_conditions(spec.get("conditions", {}), f"{path}.conditions"),
-                      seed=_integer(spec.get("seed", 0), f"{path}.seed", minimum=0),
+                      seed=_integer(spec.get("seed", 0), f"{path}.seed", minimum=0, maximum=MAX_SEED),
                       name=_string(spec["name"], f"{path}.name") if "name" in spec else "", **flat)
 
 
@@ -460,7 +497,7 @@ def _generated(value: Any, path: str) -> Scenario:
     if "seed" in spec:
         if "split" in spec or "index" in spec:
             raise _Invalid(path, "give either seed, or split and index, not both")
-        seed = _integer(spec["seed"], f"{path}.seed", minimum=0)
+        seed = _integer(spec["seed"], f"{path}.seed", minimum=0, maximum=MAX_SEED)
     else:
         for key in ("split", "index"):
             if key not in spec:
@@ -482,15 +519,19 @@ def _generated(value: Any, path: str) -> Scenario:
 
 def _from_dataset(value: Any, path: str, base_dir: Path) -> Scenario:
     spec = _mapping(value, path, ("root", "split", "image", "seed"), ("root", "split", "image"))
-    written = Path(_string(spec["root"], f"{path}.root")).expanduser()
-    # Relative to the mission file, not the working directory: the file means the same wherever it is run.
-    root = (written if written.is_absolute() else base_dir / written).resolve()
-    if not root.is_dir():
+    try:
+        written = Path(_string(spec["root"], f"{path}.root")).expanduser()
+        # Relative to the mission file, not the working directory: the file means the same wherever it is run.
+        root = (written if written.is_absolute() else base_dir / written).resolve()
+        found = root.is_dir()
+    except (RuntimeError, ValueError, OSError) as error:  # ~unknown-user, a NUL character, a symlink loop
+        raise _Invalid(f"{path}.root", f"not a usable folder path ({error})") from None
+    if not found:
         relative = "" if written.is_absolute() else f" ({str(written)!r} is relative to {base_dir.resolve()})"
         raise _Invalid(f"{path}.root", f"dataset folder not found: {root}{relative}")
     split = _string(spec["split"], f"{path}.split")
     image = _string(spec["image"], f"{path}.image")
-    seed = _integer(spec.get("seed", 0), f"{path}.seed", minimum=0)
+    seed = _integer(spec.get("seed", 0), f"{path}.seed", minimum=0, maximum=MAX_SEED)
     try:
         from missions.datasets import YoloDataset, image_seed, scenario_from_item
     except ImportError as error:

@@ -1,13 +1,16 @@
 """A trained policy loaded from a training checkpoint, acting deterministically (evaluation, export)."""
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import torch
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM
+from autonomy.policy import one_line
 from missions.goals import GOAL_NAMES
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
@@ -27,6 +30,43 @@ def checkpoint_file(path: Path | str) -> Path:
     return path
 
 
+CHECKPOINT_KEYS = ("config", "normalizer", "low", "step")
+"""Entries every training checkpoint holds (``meta`` too for HRL-SAC); their absence means another kind of file."""
+
+
+def load_checkpoint_state(source: BinaryIO | Path, path: Path) -> dict:
+    """``torch.load`` of a training checkpoint (an open file or a path); whatever is wrong with the file is one
+    ValueError naming ``path``, with a hint when it is a policy artifact rather than a checkpoint."""
+    if _is_policy_artifact(source):  # refused before torch.load, which would hand it on to torch.jit.load
+        raise ValueError(f"{path}: not a readable training checkpoint: it is a policy artifact ('hrlsac policy info' "
+                         "reads it); give the training checkpoint (checkpoint.pt of the run folder) instead")
+    try:
+        state = torch.load(source, map_location="cpu", weights_only=False)
+    except Exception as exc:  # torch.load raises anything from UnpicklingError to RuntimeError on a bad file
+        problem = one_line(exc)
+    else:
+        if not isinstance(state, dict):
+            problem = f"it holds a {type(state).__name__}, not a checkpoint's dict"
+        else:
+            missing = [key for key in CHECKPOINT_KEYS if key not in state]
+            if not missing:
+                return state
+            problem = f"no {', '.join(map(repr, missing))} in it"
+    raise ValueError(f"{path}: not a readable training checkpoint ({problem})")
+
+
+def _is_policy_artifact(source: BinaryIO | Path) -> bool:
+    """Whether the file is a zip holding a manifest.json, i.e. what ``hrlsac export`` writes."""
+    try:
+        with zipfile.ZipFile(source) as archive:
+            return any(name.endswith("extra/manifest.json") for name in archive.namelist())
+    except Exception:  # not a zip, or a damaged one: not an artifact either way (torch.load will say more)
+        return False
+    finally:
+        if not isinstance(source, Path):
+            source.seek(0)  # torch.load reads the same handle next
+
+
 @dataclass
 class CheckpointPolicy:
     """Normaliser + low-level (or flat) actor + meta-controller (HRL-SAC) of one checkpoint."""
@@ -40,9 +80,19 @@ class CheckpointPolicy:
 
     @classmethod
     def load(cls, path: Path | str) -> "CheckpointPolicy":
-        """From a checkpoint file or a run folder (its checkpoint.pt)."""
+        """From a checkpoint file or a run folder (its checkpoint.pt); ValueError if it is not a checkpoint."""
         path = checkpoint_file(path)
-        return cls.from_state(torch.load(path, map_location="cpu", weights_only=False), path)
+        with path.open("rb") as handle:
+            return cls.read(handle, path)
+
+    @classmethod
+    def read(cls, handle: BinaryIO, path: Path) -> "CheckpointPolicy":
+        """From an open checkpoint file; any problem with its bytes is one ValueError naming ``path``."""
+        state = load_checkpoint_state(handle, path)
+        try:
+            return cls.from_state(state, path)
+        except Exception as exc:  # a state dict of other networks or config fields: anything from KeyError up
+            raise ValueError(f"{path}: not a readable training checkpoint ({one_line(exc)})") from None
 
     @classmethod
     def from_state(cls, state: dict, path: Path) -> "CheckpointPolicy":

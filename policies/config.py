@@ -156,7 +156,7 @@ class TrainConfig:
                              f"got {self.intrinsic_reward!r}")
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
-                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9)):
+                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 raise ValueError(f"TrainConfig.{name} must be an integer in [{low}, {high}], got {value!r}")

@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from autonomy.observation import OBS_DIM
+from autonomy.observation import OBSERVATION_HIGH, OBSERVATION_LOW
 from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchBatch, SarSearchConfig, next_episode_seed
 from missions.render import render_search
 
@@ -29,7 +29,7 @@ class SarSearchEnv(gym.Env):
         self.config = config or SarSearchConfig()
         self.render_mode = render_mode
         self.core = SarSearchBatch(self.config, 1)
-        self.observation_space = gym.spaces.Box(0.0, 1.0, shape=(OBS_DIM,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
         self.action_space = gym.spaces.Box(ACTION_LOW, ACTION_HIGH, dtype=np.float32)
         self._seed: int | None = None
         self._path: list[tuple[float, float]] = []

@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from autonomy.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
+
 
 def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
@@ -15,6 +17,7 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     parser.add_argument("--split", choices=["train", "val", "test"], default="test")
     parser.add_argument("--episodes", type=int, default=100, help="one episode on each of the first N scenarios")
     parser.add_argument("--out", default=None, help="metrics file (default: RUN/eval_SPLIT.json)")
+    add_pool_arguments(parser)
     args = parser.parse_args(argv)
     if args.episodes < 1:
         print(f"{prog}: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
@@ -22,8 +25,11 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     from policies.evaluation import evaluate_checkpoint
 
     try:
-        metrics = evaluate_checkpoint(args.run, args.split, args.episodes)
-    except (FileNotFoundError, ValueError, KeyError) as exc:
+        pool = pool_from_arguments(args)
+        if pool.workers > 1 or pool.uses_ray:
+            print(f"evaluating {args.episodes} episodes on {pool.describe()}", file=sys.stderr, flush=True)
+        metrics = evaluate_checkpoint(args.run, args.split, args.episodes, pool, _chunk_done)
+    except (FileNotFoundError, ValueError, KeyError, WorkerPoolError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     run = Path(args.run)
@@ -39,3 +45,8 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
              if metrics["subgoal_reachability"] is not None else ""))
     print(f"written {out}")
     return 0
+
+
+def _chunk_done(done: int, chunks: int) -> None:
+    if chunks > 1:
+        print(f"  {done}/{chunks} chunks of episodes done", file=sys.stderr, flush=True)

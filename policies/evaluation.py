@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 
+from missions.goals import RETURN_TO_BASE
 from missions.mission import FlightSettings
 from policies.env_core import SarSearchBatch, SarSearchConfig, make_batch
 from policies.evaluation_stats import quantiles, wilson_interval
@@ -20,11 +21,15 @@ ActFn = Callable[[SarSearchBatch], np.ndarray]
 GoalFn = Callable[[np.ndarray], np.ndarray]
 
 
-def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None = None) -> dict[str, np.ndarray]:
+def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None = None,
+                 return_to_base_ends_search: bool = False) -> dict[str, np.ndarray]:
     """Fly every slot of ``core`` to the end of its current episode; per-episode outcome arrays.
 
     ``act(core)`` returns (N, 4) actions; ``choose_goals(meta_obs)`` (HRL) returns goal indices for the rows it
-    is given, called every K steps.
+    is given, called every K steps. ``return_to_base_ends_search``: the mission runner's rule (a ReturnToBase
+    decision ends the search: the vehicle is sent home with RTL) instead of training's (ReturnToBase is a sub-goal
+    like the others, flown by the low level until the next decision); used to compare flight with the
+    environment on equal terms (benchmarks/sim_to_sitl.py).
     """
     n, k = core.n, core.flight.subgoal_interval
     done = np.zeros(n, dtype=bool)
@@ -44,22 +49,36 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
                 goals = np.zeros(n, dtype=np.int64)
                 goals[decide] = choose_goals(core.meta_observation[decide])
                 core.set_goals(goals, decide)
+                if return_to_base_ends_search:
+                    gave_up = decide & (goals == RETURN_TO_BASE)
+                    _record_end(record, gave_up, core.steps, core.first_detection_step, core.episode_return,
+                                core.coverage_ratio)
+                    segments += gave_up  # the ReturnToBase segment counts, unreached, as in flight
+                    done |= gave_up
+                    if done.all():
+                        break
         _, _, terminated, truncated, info = core.step(act(core))
         if choose_goals is not None:
             reached |= np.hypot(*(info["position"] - info["goal_point"]).T) <= core.flight.reach_radius_m
         ended = (terminated | truncated) & ~done
         for key in ("success", "collision", "out_of_bounds"):
             record[key][ended] = info[key][ended]
-        record["length"][ended] = info["steps"][ended]
-        record["first_detection"][ended] = info["first_detection_step"][ended]
-        record["episode_return"][ended] = info["episode_return"][ended]
-        record["coverage"][ended] = info["coverage_ratio"][ended]
+        _record_end(record, ended, info["steps"], info["first_detection_step"], info["episode_return"],
+                    info["coverage_ratio"])
         if choose_goals is not None:
             segments += ended
             reached_segments += ended & reached
         done |= ended
     record["subgoal_segments"], record["subgoals_reached"] = segments, reached_segments
     return record
+
+
+def _record_end(record: dict[str, np.ndarray], ended: np.ndarray, steps: np.ndarray, first_detection: np.ndarray,
+                episode_return: np.ndarray, coverage: np.ndarray) -> None:
+    record["length"][ended] = steps[ended]
+    record["first_detection"][ended] = first_detection[ended]
+    record["episode_return"][ended] = episode_return[ended]
+    record["coverage"][ended] = coverage[ended]
 
 
 def summarise(record: dict[str, np.ndarray]) -> dict:
@@ -85,20 +104,17 @@ def summarise(record: dict[str, np.ndarray]) -> dict:
     }
 
 
-def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_conditioned: bool) -> SarSearchBatch:
-    """One slot per scenario 0..episodes-1 of ``split``."""
+def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_conditioned: bool,
+                  slots: range | None = None) -> SarSearchBatch:
+    """One slot per scenario 0..episodes-1 of ``split`` (or only those in ``slots``, a part of that range:
+    scenario i is flown with episode seed i whichever batch it is in, so parts concatenate to the whole)."""
     config = SarSearchConfig(split=split, flight=flight, pool_size=max(episodes, 1), goal_conditioned=goal_conditioned)
-    return make_batch(config, list(range(episodes)))
+    return make_batch(config, list(range(episodes) if slots is None else slots))
 
 
-def evaluate_checkpoint(path, split: str = "test", episodes: int = 100) -> dict:
-    """The paper's metrics of a trained run's deterministic policy on ``split``."""
-    from policies.checkpoint_policy import CheckpointPolicy
+def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None) -> dict:
+    """The paper's metrics of a trained run's deterministic policy on ``split``; with ``pool`` (an
+    ``autonomy.worker_pool.PoolConfig``) the episodes are split across workers, with identical results."""
+    from policies.parallel_evaluation import evaluate_in_chunks
 
-    policy = CheckpointPolicy.load(path)
-    core = episode_batch(split, episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
-    record = run_episodes(core, lambda batch: policy.act(batch.obs),
-                          policy.choose_goals if policy.hierarchical else None)
-    return {"algo": policy.config.algo, "preset": policy.config.preset, "seed": policy.config.seed,
-            "checkpoint": str(policy.path), "trained_steps": policy.step, "split": split,
-            "max_steps": policy.config.flight.max_steps, **summarise(record)}
+    return evaluate_in_chunks(path, split, episodes, pool, on_done)

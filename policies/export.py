@@ -25,7 +25,7 @@ from pathlib import Path
 import torch
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM
-from autonomy.policy import ACT_PROGRAM, GOAL_PROGRAM, load_policy, one_line
+from autonomy.policy import ACT_PROGRAM, GOAL_PROGRAM, load_policy
 from autonomy.policy_manifest import (
     FORMAT_VERSION,
     MANIFEST_FILE,
@@ -104,10 +104,7 @@ def read_checkpoint(path: Path | str) -> tuple[CheckpointPolicy, str]:
     with path.open("rb") as handle:
         sha256 = hashlib.file_digest(handle, "sha256").hexdigest()
         handle.seek(0)
-        try:
-            policy = CheckpointPolicy.from_state(torch.load(handle, map_location="cpu", weights_only=False), path)
-        except Exception as exc:  # torch.load raises anything from UnpicklingError to RuntimeError on a bad file
-            raise ValueError(f"{path}: not a readable training checkpoint ({one_line(exc)})") from None
+        policy = CheckpointPolicy.read(handle, path)
     return policy, sha256
 
 

@@ -293,7 +293,9 @@ class Trainer:
     def _load(self, path: Path) -> None:
         if not path.exists():
             raise FileNotFoundError(f"cannot resume: no checkpoint at {path}")
-        state = torch.load(path, map_location="cpu", weights_only=False)
+        from policies.checkpoint_policy import load_checkpoint_state  # it imports this module
+
+        state = load_checkpoint_state(path, path)  # a damaged file is one ValueError naming it
         self.step, self.update_budget = state["step"], state["update_budget"]
         self.low.load_state_dict(state["low"])
         self.low_buffer.load_state_dict(state["low_buffer"])

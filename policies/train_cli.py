@@ -22,20 +22,22 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
     parser.add_argument("--out", required=True, help="run folder (config.json, progress.csv, checkpoint.pt, tensorboard/)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="override a TrainConfig field (JSON value), e.g. --set warmup_steps=500")
+                        help="override a TrainConfig field (JSON value; dotted for nested fields), e.g. --set warmup_steps=500 "
+                             "--set flight.max_steps=120 --set actor.hidden=[64,64]")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
 
 def _overrides(items: list[str]) -> dict:
-    from policies.config import TrainConfig
+    from policies.sweep_config import field_problem
 
-    names = {f.name for f in dataclasses.fields(TrainConfig)}
     out = {}
     for item in items:
         name, sep, text = item.partition("=")
-        if not sep or name not in names:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(sorted(names))}")
+        problem = field_problem(name) if sep else "no '='"
+        if problem:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD a TrainConfig field, dotted for "
+                             f"nested ones (flight.max_steps, actor.hidden): {problem}")
         try:
             out[name] = json.loads(text)
         except json.JSONDecodeError:
@@ -46,6 +48,7 @@ def _overrides(items: list[str]) -> dict:
 def main(argv: list[str], prog: str = "hrlsac train") -> int:
     args = build_parser(prog).parse_args(argv)
     from policies.config import TrainConfig
+    from policies.sweep_config import build_train_config
     from policies.train import Trainer
 
     run_dir = Path(args.out)
@@ -54,7 +57,11 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
             config_path = run_dir / "config.json"
             if not (run_dir / CHECKPOINT).exists() or not config_path.exists():
                 raise ValueError(f"--resume: no checkpoint in {run_dir} (expected {CHECKPOINT} and config.json)")
-            config = TrainConfig.from_dict(json.loads(config_path.read_text()))
+            try:
+                config = TrainConfig.from_dict(json.loads(config_path.read_text()))
+            except (ValueError, TypeError, KeyError, AttributeError) as exc:  # damaged or hand-edited
+                raise ValueError(f"{config_path}: not a readable training config ({type(exc).__name__}: {exc})") \
+                    from None
             if args.steps != config.total_steps and "--steps" in argv:
                 config = dataclasses.replace(config, total_steps=args.steps)
             trainer = Trainer(config, run_dir, resume=True)
@@ -64,10 +71,9 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
             overrides = _overrides(args.set)
             if args.num_envs is not None:
                 overrides["num_envs"] = args.num_envs
-            config = TrainConfig.from_preset(args.preset, algo=args.algo, total_steps=args.steps, seed=args.seed,
-                                        **overrides)
+            config = build_train_config(args.preset, args.algo, args.seed, args.steps, overrides)
             trainer = Trainer(config, run_dir)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
+    except (ValueError, TypeError, OSError) as exc:  # OSError: an --out that cannot be created
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     if not args.quiet:

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from autonomy.observation import OBS_DIM
+from autonomy.observation import OBSERVATION_HIGH, OBSERVATION_LOW
 from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchBatch, SarSearchConfig, next_episode_seed
 
 
@@ -30,7 +30,7 @@ class SarSearchVectorEnv(VectorEnv):
         self.config = config or SarSearchConfig()
         self.num_envs = num_envs
         self.core = SarSearchBatch(self.config, num_envs)
-        self.single_observation_space = gym.spaces.Box(0.0, 1.0, shape=(OBS_DIM,), dtype=np.float32)
+        self.single_observation_space = gym.spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
         self.single_action_space = gym.spaces.Box(ACTION_LOW, ACTION_HIGH, dtype=np.float32)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)

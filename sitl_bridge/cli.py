@@ -7,8 +7,10 @@ import sys
 import time
 
 from missions.geodesy import GeoPoint
+from missions.signing import load_key_file
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.dynamics import Wind
+from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.vehicle import DEFAULT_HOME, VehicleConfig
 
@@ -32,12 +34,28 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                       help="set a PX4 parameter at boot (repeatable)")
     ports = parser.add_argument_group("links")
     ports.add_argument("--host", default="127.0.0.1", help="address to bind and to send to")
-    ports.add_argument("--api-port", type=int, default=14580, help="local port of the API/offboard link")
-    ports.add_argument("--api-remote", type=int, default=14540, help="port the API link sends to (MAVSDK)")
-    ports.add_argument("--gcs-port", type=int, default=18570, help="local port of the ground-station link")
-    ports.add_argument("--gcs-remote", type=int, default=14550, help="port the GCS link sends to; 0 disables it")
+    ports.add_argument("--api-port", type=udp_port, default=14580, help="local port of the API/offboard link")
+    ports.add_argument("--api-remote", type=udp_port, default=14540, help="port the API link sends to (MAVSDK)")
+    ports.add_argument("--gcs-port", type=udp_port, default=18570, help="local port of the ground-station link")
+    ports.add_argument("--gcs-remote", type=udp_port, default=14550, help="port the GCS link sends to; 0 disables it")
+    parser.add_argument("--signing-key", metavar="FILE", default=None,
+                        help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything, reject unsigned, "
+                             "wrongly signed and replayed messages except PX4's unsigned allow-list")
+    ports.add_argument("--link-faults", metavar="SPEC", default=None,
+                       help="inject link faults on the wall clock (seeded by --seed): " + SPEC_HELP)
     parser.add_argument("--quiet", action="store_true", help="do not log commands and mode changes")
     return parser
+
+
+def udp_port(text: str) -> int:
+    """argparse type of a UDP port number: an integer in [0, 65535] (the socket module overflows beyond)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"invalid port {text!r} (an integer in 0-65535)")
+    return port
 
 
 def _floats(text: str, count: int, what: str) -> list[float]:
@@ -59,9 +77,10 @@ def config_from_args(args: argparse.Namespace) -> VehicleConfig:
         if not sep:
             raise ValueError(f"--param: expected NAME=VALUE, got {item!r}")
         params[name.strip().upper()] = _floats(value, 1, f"--param {name}")[0]
+    key = load_key_file(args.signing_key) if args.signing_key else None
     return VehicleConfig(home=GeoPoint(lat, lon, alt), seed=args.seed, physics_rate_hz=args.rate,
                          wind=Wind(north_mps=wind_north, east_mps=wind_east, gust_mps=args.gusts, seed=args.seed),
-                         params=params)
+                         params=params, signing_key=key)
 
 
 def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
@@ -74,7 +93,8 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
             if not args.quiet:
                 print(f"[{event.time_s:9.2f} s] {event.text}", flush=True)
 
-        server = VehicleServer(config, ports, speed=args.speed, on_event=log)
+        faults = parse_link_faults(args.link_faults) if args.link_faults else None
+        server = VehicleServer(config, ports, speed=args.speed, on_event=log, link_faults=faults)
     except (ValueError, OSError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
@@ -87,6 +107,11 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
     if ports.gcs_remote_port:
         print(f"  GCS link  udp {args.host}:{args.gcs_port} -> {args.host}:{args.gcs_remote}"
               f"   QGroundControl / MAVProxy: --master=udpin:0.0.0.0:{args.gcs_remote}")
+    if config.signing_key is not None:
+        print(f"  MAVLink 2 signing on (key {args.signing_key}): unsigned messages accepted only for "
+              "HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION")
+    if faults is not None:
+        print(f"  link faults: {faults.describe()} (wall clock from start)")
     print("Ctrl-C stops.", flush=True)
     # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and Python then
     # installs no KeyboardInterrupt handler: install it, and treat SIGTERM (service managers, kill) the same.
@@ -100,6 +125,8 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
         print("\nstopping", flush=True)
     finally:
         server.stop()
+    if server.vehicle.signing is not None:
+        print(f"signing: {server.vehicle.signing.describe_rejections()}", flush=True)
     if server.error is not None:
         print(f"{prog}: error: {server.error}", file=sys.stderr)
         return 1

@@ -10,6 +10,7 @@ decides when the next tick happens:
 """
 from __future__ import annotations
 
+import math
 import time
 
 
@@ -29,8 +30,8 @@ class WallClock:
     """Paces simulated time to the wall clock, ``speed`` simulated seconds per wall second."""
 
     def __init__(self, speed: float = 1.0):
-        if not speed > 0:
-            raise ValueError(f"speed must be > 0 (simulated seconds per wall second), got {speed}")
+        if not 0 < speed < math.inf:  # inf would pace nothing and spin a core
+            raise ValueError(f"speed must be > 0 and finite (simulated seconds per wall second), got {speed}")
         self.speed = speed
         self._wall_start = time.monotonic()
 

@@ -10,8 +10,10 @@ import threading
 from dataclasses import dataclass
 from typing import Callable
 
+from missions.signing import wall_timestamp
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.clock import WallClock
+from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now
 from sitl_bridge.link import UdpLink
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
@@ -36,7 +38,9 @@ class VehicleServer:
     """A :class:`SimulatedVehicle` ticking in real time (times ``speed``) over UDP, in a thread or the foreground."""
 
     def __init__(self, config: VehicleConfig | None = None, ports: UdpPorts = UdpPorts(), speed: float = 1.0,
-                 on_event: Callable[[AutopilotEvent], None] | None = None):
+                 on_event: Callable[[AutopilotEvent], None] | None = None, link_faults: LinkFaults | None = None):
+        """``link_faults``: injected on every link, timed on the wall clock from now, seeded by the vehicle's seed
+        (plus the link's index) unless they carry their own seed."""
         self.clock = WallClock(speed)
         self.links = [UdpLink("api", (ports.host, ports.api_port), (ports.host, ports.api_remote_port))]
         if ports.gcs_remote_port is not None:
@@ -45,7 +49,11 @@ class VehicleServer:
             except OSError:
                 self.links[0].close()
                 raise
-        self.vehicle = SimulatedVehicle(config, self.links, on_event=on_event)
+        seed = (config or VehicleConfig()).seed
+        self.faulty_links = apply_faults(self.links, link_faults, wall_clock_since_now(), seed)
+        # Real clients (pymavlink, MAVSDK, QGroundControl) sign with the wall clock: so must we.
+        self.vehicle = SimulatedVehicle(config, self.faulty_links, on_event=on_event,
+                                        signing_timestamp=wall_timestamp)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None

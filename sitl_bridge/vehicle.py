@@ -13,12 +13,14 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
+from missions.signing import KEY_BYTES, LinkSigning, simulated_timestamp
 from sitl_bridge import dynamics, telemetry
 from sitl_bridge.autopilot import ACCEPTED, DENIED, Autopilot, AutopilotEvent, as_int
 from sitl_bridge.link import Link
 from sitl_bridge.params import ParameterStore, decode_bytewise, encode_bytewise
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.sensors import SensorConfig, SensorSuite
+from sitl_bridge.signing import requested_key, vehicle_signing
 
 AUTOPILOT_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1
 CAMERA_COMPONENT = mavlink.MAV_COMP_ID_CAMERA  # zoom commands may be addressed to the camera
@@ -47,12 +49,17 @@ class VehicleConfig:
     """PX4 parameter overrides by name (see sitl_bridge.params.PARAM_SPECS)."""
     telemetry_rates_hz: dict[int, float] = field(default_factory=dict)
     """Overrides of the default stream rates by message id (0 disables a stream)."""
+    signing_key: bytes | None = field(default=None, repr=False)
+    """MAVLink 2 signing secret (32 bytes, see missions.signing.load_key_file); None: no signing."""
 
     def __post_init__(self) -> None:
         if not 100.0 <= self.physics_rate_hz <= 2000.0:
             raise ValueError(f"physics_rate_hz must be in [100, 2000], got {self.physics_rate_hz}")
         if not 1 <= self.system_id <= 250:
             raise ValueError(f"system_id must be in [1, 250], got {self.system_id}")
+        if self.signing_key is not None and len(self.signing_key) != KEY_BYTES:
+            raise ValueError(f"signing_key must be {KEY_BYTES} bytes, got {len(self.signing_key)}; "
+                             "load it with missions.signing.load_key_file")
 
 
 class _LinkWriter:
@@ -75,12 +82,26 @@ class Endpoint:
     def send(self, msg: mavlink.MAVLink_message) -> None:
         self.mav.send(msg)
 
+    def parse(self, data: bytes) -> list[mavlink.MAVLink_message]:
+        """The messages in one received datagram. Links carry whole frames per datagram (UDP, the memory link),
+        so bytes left over are a damaged frame: dropped and counted, never allowed to swallow the next datagram
+        (a garbage header claiming 255 bytes would otherwise eat the following valid command)."""
+        messages = self.mav.parse_buffer(data) or []
+        if self.mav.buf_len():
+            self.bad_frames += 1
+            self.mav.buf, self.mav.buf_index = bytearray(), 0
+            self.mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        return messages
+
 
 class SimulatedVehicle:
     """A PX4-like multirotor; call :meth:`step` once per physics tick."""
 
     def __init__(self, config: VehicleConfig | None = None, links: list[Link] | tuple[Link, ...] = (),
-                 on_event: Callable[[AutopilotEvent], None] | None = None):
+                 on_event: Callable[[AutopilotEvent], None] | None = None,
+                 signing_timestamp: Callable[[], int] | None = None):
+        """``signing_timestamp``: the signing clock (default: simulated time from the MAVLink epoch, for
+        deterministic lockstep runs; real-time servers pass missions.signing.wall_timestamp)."""
         self.config = config = config or VehicleConfig()
         self.dt_s = 1.0 / config.physics_rate_hz
         self.tick = 0
@@ -98,6 +119,11 @@ class SimulatedVehicle:
         self.on_event = on_event
         self.unhandled: dict[str, int] = {}
         self.handler_errors = 0
+        self.signing_timestamp = signing_timestamp or simulated_timestamp(lambda: self.time_s)
+        self.signing: LinkSigning | None = None
+        self.setup_signing_refused = 0
+        if config.signing_key is not None:
+            self._enable_signing(config.signing_key)
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -109,6 +135,7 @@ class SimulatedVehicle:
             "SET_MODE": self._on_set_mode,
             "MISSION_REQUEST_LIST": self._on_mission_request_list,
             "HEARTBEAT": lambda endpoint, msg: None,
+            "SETUP_SIGNING": self._on_setup_signing,
         }
         self.sensors.update(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self.autopilot.gps_ok = self.sensors.gps is not None
@@ -134,8 +161,7 @@ class SimulatedVehicle:
         now = self.time_s
         for endpoint in self.endpoints:
             for data in endpoint.link.receive():
-                for msg in endpoint.mav.parse_buffer(data) or ():
-                    self._handle(endpoint, msg, now)
+                self.receive(endpoint, data)
         ap = self.autopilot
         self.command = ap.guidance(now, self.state)
         airframe, wind = self.config.airframe, self.config.wind
@@ -183,6 +209,13 @@ class SimulatedVehicle:
             self.on_event(AutopilotEvent(self.time_s, text, mavlink.MAV_SEVERITY_DEBUG))
 
     # ------------------------------------------------------------------ incoming messages
+    def receive(self, endpoint: Endpoint, data: bytes) -> None:
+        """Parse bytes that arrived on ``endpoint`` and act on every admitted message (any bytes are safe)."""
+        now = self.time_s
+        for msg in endpoint.parse(data):
+            if self._admitted(msg):
+                self._handle(endpoint, msg, now)
+
     def _handle(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         name = msg.get_type()
         handler = self._handlers.get(name)
@@ -194,8 +227,19 @@ class SimulatedVehicle:
                 self.log(f"error handling {name}: {exc!r}")
         elif name == "BAD_DATA":
             endpoint.bad_frames += 1
-        else:
+        else:  # ids this dialect does not know share one counter: garbage can make 16 million of them
+            name = "UNKNOWN" if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_UNKNOWN else name
             self.unhandled[name] = self.unhandled.get(name, 0) + 1
+
+    def _admitted(self, msg: mavlink.MAVLink_message) -> bool:
+        """With signing on, whether the frame is signed with our key and fresh (or on PX4's unsigned allow-list)."""
+        if self.signing is None or msg.get_type() == "BAD_DATA":
+            return True
+        accepted, verdict = self.signing.admit(msg.get_msgbuf(), msg.get_msgId(), msg.get_type())
+        if not accepted and self.signing.rejected[verdict] == 1:  # log each reason once; the rest are counted
+            self.log(f"signing: rejected {msg.get_type()} from {msg.get_srcSystem()}/{msg.get_srcComponent()} "
+                     f"({verdict}); further rejections are only counted")
+        return accepted
 
     def _for_us(self, msg: mavlink.MAVLink_message, components: tuple[int, ...] = (AUTOPILOT_COMPONENT,)) -> bool:
         return (msg.target_system in (0, self.config.system_id)
@@ -296,6 +340,33 @@ class SimulatedVehicle:
     def _on_timesync(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if msg.tc1 == 0:  # a request: answer with our time in ns
             endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))
+
+    # ------------------------------------------------------------------ signing
+    def _enable_signing(self, key: bytes) -> None:
+        self.signing = vehicle_signing(key, self.signing_timestamp)
+        for link_id, endpoint in enumerate(self.endpoints):
+            self.signing.install(endpoint.mav, link_id)
+
+    def _on_setup_signing(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+        # No ACK in the protocol: the sender learns the outcome from whether our next frames verify.
+        if not self._for_us(msg):
+            return
+        if self.autopilot.armed:  # a key change in flight could cut the link to the pilot
+            self.setup_signing_refused += 1
+            self.log("SETUP_SIGNING refused: the vehicle is armed")
+            return
+        key = requested_key(msg)
+        if key is None:
+            self.signing = None
+            for other in self.endpoints:
+                other.mav.signing = mavlink.MAVLinkSigning()
+            self.log("SETUP_SIGNING: signing switched off (all-zero key)")
+        elif self.signing is None:
+            self._enable_signing(key)
+            self.log("SETUP_SIGNING: signing switched on with the new key")
+        else:
+            self.signing.replace_key(key, msg.initial_timestamp)
+            self.log("SETUP_SIGNING: new key installed")
 
     def _on_mission_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if self._for_us(msg):  # no missions are stored; saying so stops ground stations waiting

@@ -11,7 +11,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import policies  # noqa: F401  (registers SarSearch-v0)
-from autonomy.observation import FIELDS_BY_NAME, META_OBS_DIM, OBS_DIM, OBSERVATION_FIELDS
+from autonomy.observation import (FIELDS_BY_NAME, META_OBS_DIM, OBS_DIM, OBSERVATION_FIELDS,
+                                  TARGET_OFFSET_SCALE_M)
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
 from missions.scenario import Conditions, Obstacle, Scenario, SeaState, SearchArea, Target, TimeOfDay, Weather
@@ -26,6 +27,13 @@ NORTH = np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32)
 
 def field(obs: np.ndarray, name: str) -> np.ndarray:
     return obs[FIELDS_BY_NAME[name].slice]
+
+
+def target_position(obs: np.ndarray, area_size_m: float = 1000.0) -> np.ndarray:
+    """The target's position normalised like agent_position, recovered from the squashed target_offset."""
+    squashed = field(obs, "target_offset").astype(np.float64)
+    offset_m = squashed * TARGET_OFFSET_SCALE_M / (1.0 - np.hypot(*squashed))
+    return field(obs, "agent_position") + offset_m / area_size_m
 
 
 def scenario(victim=(600.0, 100.0), datum=(550.0, 80.0), obstacles=(), conditions=Conditions(), start=(0.0, 0.0),
@@ -66,7 +74,7 @@ def test_bad_configuration_is_refused_with_the_field_name():
 # ------------------------------------------------------------------ observation layout
 def test_layout_adds_up_to_the_papers_276_and_272():
     sizes = {f.name: f.size for f in OBSERVATION_FIELDS}
-    assert sizes == {"agent_position": 2, "target_position": 2, "time_progress": 1, "sea_condition": 1,
+    assert sizes == {"agent_position": 2, "target_offset": 2, "time_progress": 1, "sea_condition": 1,
                      "weather": 1, "time_of_day": 1, "visibility": 1, "wind_speed": 1, "detections": 6,
                      "coverage": 256, "goal": 4}
     assert OBS_DIM == 276 and META_OBS_DIM == 272
@@ -80,7 +88,7 @@ def test_observation_fields_one_by_one():
     env = env_for(scenario(conditions=conditions), max_steps=200)
     obs, _ = env.reset(seed=0)
     np.testing.assert_allclose(field(obs, "agent_position"), [50 / 1000, 0.5])
-    np.testing.assert_allclose(field(obs, "target_position"), [600 / 1000, 580 / 1000])  # the datum
+    np.testing.assert_allclose(target_position(obs), [600 / 1000, 580 / 1000], rtol=1e-6)  # the datum
     assert field(obs, "time_progress")[0] == 0.0
     assert field(obs, "sea_condition")[0] == 1.0 and field(obs, "weather")[0] == pytest.approx(2 / 3)
     assert field(obs, "time_of_day")[0] == pytest.approx(2 / 3)
@@ -92,7 +100,9 @@ def test_observation_fields_one_by_one():
     assert field(obs, "agent_position")[0] > 50 / 1000  # moved north
     coverage = field(obs, "coverage")
     assert coverage.any() and coverage.max() <= 1.0  # the footprint was searched
-    assert obs.dtype == np.float32 and np.all((obs >= 0) & (obs <= 1))
+    assert obs.dtype == np.float32 and np.all((obs >= -1) & (obs <= 1))
+    offset = field(obs, "target_offset")  # towards the datum, north-east of the start
+    assert offset[0] > 0 and offset[1] > 0 and np.hypot(*offset) < 1
 
 
 def test_goal_one_hot_and_goal_point_in_goal_conditioned_mode():
@@ -100,10 +110,10 @@ def test_goal_one_hot_and_goal_point_in_goal_conditioned_mode():
     env.reset(seed=0)
     obs = env.set_goal(3)  # ReturnToBase: home
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 0, 1])
-    np.testing.assert_allclose(field(obs, "target_position"), [50 / 1000, 0.5])
+    np.testing.assert_allclose(target_position(obs), [50 / 1000, 0.5])
     obs = env.set_goal(TRACK_OBJECT)  # nothing detected yet: the centre of the datum's grid cell (1000 m / 32)
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 1, 0])
-    np.testing.assert_allclose(field(obs, "target_position"), [19.5 / 32, 18.5 / 32])
+    np.testing.assert_allclose(target_position(obs), [19.5 / 32, 18.5 / 32])
     np.testing.assert_array_equal(env.meta_observation, obs[:272])
     with pytest.raises(ValueError, match=r"goal indices must be in \[0, 3\]"):
         env.set_goal(4)
@@ -116,7 +126,7 @@ def test_target_follows_the_datum_drifted_by_current_and_leeway_until_detection(
     env.reset(seed=0)
     for _ in range(10):
         obs, *_ = env.step(HOVER)
-    np.testing.assert_allclose(field(obs, "target_position"), [600 / 1000, 585 / 1000], atol=1e-6)
+    np.testing.assert_allclose(target_position(obs), [600 / 1000, 585 / 1000], atol=1e-6)
 
 
 def test_a_reached_goal_is_grounded_again_before_the_next_decision():
@@ -136,17 +146,17 @@ def test_a_reached_goal_is_grounded_again_before_the_next_decision():
     np.testing.assert_allclose(info["goal_point"], first_point)  # the point this step flew to
     assert np.hypot(*(env.core.goal_point[0] - first_point)) > 15.0  # the next one, already in the observation
     assert env.core.goal[0] == 1 and field(obs, "goal")[1] == 1
-    np.testing.assert_allclose(field(obs, "target_position"),
+    np.testing.assert_allclose(target_position(obs),
                                [(env.core.goal_point[0, 0] + 50) / 1000, (env.core.goal_point[0, 1] + 500) / 1000],
                                atol=1e-6)
 
 
-def test_target_position_never_leaks_the_victim_until_it_is_detected():
+def test_target_never_leaks_the_victim_until_it_is_detected():
     # Victim 12 m east of the start, directly in view at 20 m: detected at once, but not reachable (radius 1 m).
     env = env_for(scenario(victim=(0.0, 12.0), datum=(300.0, -200.0)), altitude_m=20.0, reach_radius_m=1.0)
     obs, _ = env.reset(seed=0)
     victim = np.array([50 / 1000, 512 / 1000])
-    assert not np.allclose(field(obs, "target_position"), victim, atol=1e-3)
+    assert not np.allclose(target_position(obs), victim, atol=1e-3)
     seen = False
     for _ in range(20):
         obs, _, _, _, info = env.step(np.array([0.0, 0.0, 1.0, 0.0], dtype=np.float32))
@@ -154,7 +164,7 @@ def test_target_position_never_leaks_the_victim_until_it_is_detected():
             seen = True
             break
     assert seen
-    np.testing.assert_allclose(field(obs, "target_position"), victim, atol=1e-3)
+    np.testing.assert_allclose(target_position(obs), victim, atol=1e-3)
     assert field(obs, "detections")[0] == 1.0  # a person was detected this step
 
 
@@ -315,3 +325,17 @@ def test_stable_baselines3_sac_trains_on_the_environment():
     action, _ = model.predict(obs, deterministic=True)
     assert env.action_space.contains(action.astype(np.float32))
     assert math.isfinite(float(model.logger.name_to_value.get("train/critic_loss", 0.0)))
+
+
+def test_target_offset_is_the_direction_with_a_squashed_distance():
+    from autonomy.observation import build_observations
+    n = 3
+    agent = np.zeros((n, 2))
+    target = np.array([[15.0, 0.0], [0.0, -100.0], [3000.0, 4000.0]])  # 15 m north, 100 m west, 5 km away
+    obs = build_observations(agent, target, np.tile([-500.0, 500.0, -500.0, 500.0], (n, 1)), np.zeros(n),
+                             np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n), np.zeros(n),
+                             np.zeros((n, 6), bool), np.zeros((n, 256)), np.full(n, -1))
+    offsets = obs[:, FIELDS_BY_NAME["target_offset"].slice]
+    np.testing.assert_allclose(offsets[0], [15 / 115, 0.0], rtol=1e-6)  # resolves metres near the target
+    np.testing.assert_allclose(offsets[1], [0.0, -0.5], rtol=1e-6)  # length 0.5 at the scale distance
+    np.testing.assert_allclose(offsets[2], [0.6 * 5000 / 5100, 0.8 * 5000 / 5100], rtol=1e-6)  # saturates, < 1

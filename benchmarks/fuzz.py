@@ -1,0 +1,449 @@
+"""Fuzz the two MAVLink receive paths with random and mutated frames, seeded, and count what happens.
+
+The receive paths:
+  * vehicle: ``SimulatedVehicle.receive`` (pymavlink parsing, signing checks, every message handler), with the
+    physics stepped every few frames so hostile commands are also flown; once without and once with a signing
+    key (with a key nothing fuzzed may arm it or change its mode: the fuzzer does not have the key);
+  * runner: ``autonomy.runner.receive_telemetry`` (the companion computer's pymavlink connection, VehicleLink,
+    the Kalman filter) plus every reading the runner's state machine takes from the link.
+
+Frames: a corpus of valid frames of both directions (MAVLink 1 and 2, unsigned and signed with a key the targets
+do not know), then per frame one of: random bytes, bit flips, truncation, a lying length byte, a wrong CRC, an
+unknown message id, MAVLink 1/2 marker swapped, the signed flag with a garbage signature, two frames spliced,
+or a valid frame whose fields hold hostile values (NaN, inf, extremes, odd modes and enums).
+
+Counted per target: frames, crashes (exceptions escaping the receive path), hangs (a frame taking > 1 s, measured;
+a frame still running after 10 s is interrupted), messages decoded, frames rejected (bad data or signing),
+invariant violations, and the frame rate.
+
+Usage: python benchmarks/fuzz.py [--frames 1000000] [--seed 0] [--out benchmarks/results/fuzz.json]
+The tests (tests/test_fuzz_mavlink.py) import this module for the targets and the mutations.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import random
+import resource
+import signal
+import struct
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script from anywhere
+
+from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+
+from autonomy.estimator import PoseEstimator  # noqa: E402
+from autonomy.runner import receive_telemetry  # noqa: E402
+from autonomy.vehicle_link import VehicleLink, enum_name  # noqa: E402
+from sitl_bridge.link import MemoryMavConnection, memory_link_pair  # noqa: E402
+from sitl_bridge.vehicle import DEFAULT_HOME, SimulatedVehicle, VehicleConfig  # noqa: E402
+
+TARGET_KEY = bytes(range(1, 33))  # what the signed targets use
+ATTACKER_KEY = bytes(range(101, 133))  # what the corpus's signed frames use: the fuzzer never has the real key
+HANG_S = 1.0
+INTERRUPT_S = 10.0
+STEP_EVERY = 10  # vehicle physics ticks per fuzzed frames: hostile commands get flown, not only parsed
+MUTATIONS = ("random_bytes", "bit_flips", "truncate", "length_lie", "bad_crc", "unknown_msgid", "marker_swap",
+             "signed_garbage", "splice", "hostile_fields", "hostile_fields", "valid")  # hostile twice as often
+HOSTILE_FLOATS = (math.nan, math.inf, -math.inf, 3.4e38, -3.4e38, 1e-45, -0.0, 0.0, 1.0, -1.0)
+# Messages a vehicle or a companion computer acts on: what hostile field values are tried on.
+HOSTILE_TYPES = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "SET_POSITION_TARGET_LOCAL_NED", "PARAM_SET",
+                 "PARAM_REQUEST_READ", "PARAM_REQUEST_LIST", "TIMESYNC", "SET_MODE", "MISSION_REQUEST_LIST",
+                 "SETUP_SIGNING", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "HOME_POSITION", "SYS_STATUS",
+                 "COMMAND_ACK", "STATUSTEXT", "EXTENDED_SYS_STATE", "ATTITUDE", "GPS_RAW_INT", "RADIO_STATUS",
+                 "ADSB_VEHICLE", "COLLISION", "AUTOPILOT_VERSION", "PARAM_VALUE", "BATTERY_STATUS")
+_CLASSES = {cls.msgname: cls for cls in mavlink.mavlink_map.values()}
+# Commands the vehicle acts on (random command numbers would almost never reach its logic), and its mode numbers.
+KNOWN_COMMANDS = (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_TAKEOFF,
+                  mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_SET_CAMERA_ZOOM,
+                  mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE,
+                  mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
+PLAUSIBLE_PARAMS = (1.0, 0.0, 1.0, 4.0, 6.0, 3.0, 2.0, 33.0, 24.0, 500.0)  # arm, custom-mode numbers, msg ids
+
+
+class _NoFile:
+    def write(self, data: bytes) -> None:
+        pass
+
+
+def encoder(system: int, component: int, key: bytes | None = None) -> mavlink.MAVLink:
+    """A pymavlink encoder (optionally signing with ``key``) used only to pack frames."""
+    mav = mavlink.MAVLink(_NoFile(), srcSystem=system, srcComponent=component)
+    if key is not None:
+        mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.timestamp = key, True, 10**11
+    return mav
+
+
+# ---------------------------------------------------------------------------------------------- frames
+def hostile_value(rng: random.Random, fieldtype: str):
+    """A value of a MAVLink field type chosen to hurt: NaN/inf/extremes for floats, the edges for integers."""
+    if fieldtype in ("float", "double"):
+        return rng.choice(HOSTILE_FLOATS) if rng.random() < 0.7 else rng.uniform(-1e6, 1e6)
+    if fieldtype == "char":
+        return bytes(rng.randrange(256) for _ in range(rng.randrange(4)))
+    bits = int(fieldtype.removesuffix("_t").lstrip("uint") or 8)
+    signed = not fieldtype.startswith("u")
+    low, high = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+    return rng.choice((low, high, 0, 1, -1 if signed else 2, rng.randint(low, high)))
+
+
+def hostile_message(rng: random.Random, name: str | None = None) -> mavlink.MAVLink_message:
+    """A message of a type the targets act on, every field hostile; addressed to system 1 half of the time."""
+    cls = _CLASSES[name or rng.choice(HOSTILE_TYPES)]
+    values = []
+    for field_name, fieldtype, length in zip(cls.fieldnames, cls.fieldtypes, cls.array_lengths):
+        if fieldtype == "char":
+            values.append(bytes(rng.randrange(256) for _ in range(rng.randrange(length + 1))))
+        elif length:
+            values.append([hostile_value(rng, fieldtype) for _ in range(length)])
+        else:
+            values.append(hostile_value(rng, fieldtype))
+        if field_name in ("target_system", "target_component") and rng.random() < 0.5:
+            values[-1] = 1 if field_name == "target_system" else rng.choice((0, 1))
+        elif field_name == "command" and rng.random() < 0.8:
+            values[-1] = rng.choice(KNOWN_COMMANDS)
+        elif field_name.startswith("param") and fieldtype == "float" and rng.random() < 0.4:
+            values[-1] = rng.choice(PLAUSIBLE_PARAMS)
+    return cls(*values)
+
+
+# Senders of the fuzzed frames: a ground station, the vehicle, a companion computer and the vehicle signing with
+# the attacker's key (so both receive paths see MAVLink 1 and 2, signed and unsigned, from plausible sources).
+_ENCODERS = (encoder(255, 190), encoder(1, 1), encoder(1, 191, ATTACKER_KEY), encoder(1, 1, ATTACKER_KEY))
+
+
+def hostile_frame(rng: random.Random) -> bytes:
+    """A valid frame (correct CRC) of a fresh :func:`hostile_message`, MAVLink 1 one time in five."""
+    while True:
+        msg, mav = hostile_message(rng), rng.choice(_ENCODERS)
+        try:
+            return msg.pack(mav, force_mavlink1=rng.random() < 0.2 and msg.id < 256)
+        except (struct.error, mavlink.MAVError, ValueError, TypeError, OverflowError):
+            continue  # a value pymavlink itself cannot pack is not a frame
+
+
+def corpus(rng: random.Random, size: int = 256) -> list[bytes]:
+    """Valid frames of both directions, the material the mutations damage."""
+    return [hostile_frame(rng) for _ in range(size)]
+
+
+def _frame_crc_offset(frame: bytearray) -> int:
+    header = 10 if frame[0] == 0xFD else 6
+    return header + frame[1]
+
+
+def mutate(frame: bytes, kind: str, rng: random.Random, other: bytes = b"") -> bytes:
+    """``frame`` damaged by one of ``MUTATIONS`` (``other``: a second frame, for splices)."""
+    data = bytearray(frame)
+    if kind == "random_bytes":
+        return bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300)))
+    if kind == "bit_flips":
+        for _ in range(rng.randint(1, 8)):
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+    elif kind == "truncate":
+        del data[rng.randrange(len(data)):]
+    elif kind == "length_lie":
+        data[1] = rng.randrange(256)
+    elif kind == "bad_crc" and _frame_crc_offset(data) + 2 <= len(data):
+        data[_frame_crc_offset(data) + rng.randrange(2)] ^= rng.randrange(1, 256)
+    elif kind == "unknown_msgid":
+        if data[0] == 0xFD:
+            data[7:10] = rng.choice((0xFFFFFF, 0x123456, 60000, 299)).to_bytes(3, "little")
+        else:
+            data[5] = rng.choice((255, 180, 201))
+    elif kind == "marker_swap":
+        data[0] = 0xFE if data[0] == 0xFD else 0xFD
+    elif kind == "signed_garbage" and data[0] == 0xFD:
+        data[2] |= 0x01
+        if rng.random() < 0.7:
+            data += bytes(rng.randrange(256) for _ in range(13))
+    elif kind == "splice":
+        cut, other_cut = rng.randrange(len(data) + 1), rng.randrange(len(other) + 1)
+        return bytes(data[:cut]) + other[other_cut:]
+    elif kind == "hostile_fields":
+        return hostile_frame(rng)  # a fresh valid frame, every field hostile
+    return bytes(data)
+
+
+def fuzz_frame(rng: random.Random, frames: list[bytes]) -> tuple[str, bytes]:
+    """One fuzzed frame: (mutation, bytes)."""
+    kind = rng.choice(MUTATIONS)
+    return kind, mutate(rng.choice(frames), kind, rng, rng.choice(frames))
+
+
+# ---------------------------------------------------------------------------------------------- targets
+class VehicleTarget:
+    """The vehicle's receive path on one in-memory link; ``signing_key`` turns signing on."""
+
+    def __init__(self, signing_key: bytes | None = None, seed: int = 0):
+        self.vehicle_end, self.client_end = memory_link_pair("fuzz")
+        self.vehicle = SimulatedVehicle(VehicleConfig(seed=seed, signing_key=signing_key), [self.vehicle_end])
+        self.endpoint = self.vehicle.endpoints[0]
+        self.frames_since_step = 0
+        self.initial_mode = self.vehicle.autopilot.mode
+
+    def feed(self, data: bytes) -> None:
+        self.vehicle.receive(self.endpoint, data)
+        self.frames_since_step += 1
+        if self.frames_since_step >= STEP_EVERY:
+            self.frames_since_step = 0
+            self.vehicle.step()
+            self.client_end.receive()  # what the vehicle said is not needed: keep memory flat
+
+    def decoded(self) -> int:
+        mav = self.endpoint.mav
+        return mav.total_packets_received - mav.total_receive_errors
+
+    def rejected(self) -> int:
+        signing = self.vehicle.signing
+        return self.endpoint.bad_frames + (sum(signing.rejected.values()) if signing else 0)
+
+    def details(self) -> dict:
+        """Exceptions a message handler raised and the vehicle contained (each is a bug, though not a crash) and
+        the signing rejections by reason."""
+        signing = self.vehicle.signing
+        return {"handler_errors": self.vehicle.handler_errors,
+                "signing_rejected": dict(signing.rejected) if signing else None,
+                "kept_state": {"unhandled_types": len(self.vehicle.unhandled)}}
+
+    def violations(self) -> list[str]:
+        """Safety invariants: a finite state always; with a key, no arming, no mode change, the key kept."""
+        vehicle, problems = self.vehicle, []
+        state = vehicle.state
+        numbers = (state.north_m, state.east_m, state.down_m, state.battery_wh, *vehicle.ground_velocity)
+        if not all(math.isfinite(value) for value in numbers):
+            problems.append(f"non-finite vehicle state {numbers}")
+        if vehicle.config.signing_key is not None:
+            if vehicle.autopilot.armed:
+                problems.append("armed by an unsigned or forged frame")
+            if vehicle.autopilot.mode is not self.initial_mode:
+                problems.append(f"mode changed to {vehicle.autopilot.mode} by a forged frame")
+            if vehicle.signing is None or vehicle.signing.key != vehicle.config.signing_key:
+                problems.append("signing key changed by a forged frame")
+        return problems
+
+
+class RunnerTarget:
+    """The companion computer's receive path: pymavlink connection, VehicleLink, Kalman filter, state readings."""
+
+    def __init__(self, signing_key: bytes | None = None):
+        self.vehicle_end, client_end = memory_link_pair("fuzz")
+        self.time_s = 0.0
+        self.link = VehicleLink(MemoryMavConnection(client_end, source_system=1, source_component=191),
+                                lambda: self.time_s, signing_key=signing_key)
+        self.estimator = PoseEstimator(home=DEFAULT_HOME)
+        self.accepted = 0
+
+    def feed(self, data: bytes) -> None:
+        self.time_s += 0.01
+        self.vehicle_end.send(data)
+        self.accepted += len(receive_telemetry(self.link, self.estimator))
+        self.vehicle_end.receive()  # the companion's heartbeats: not needed
+        self.read_like_the_runner()
+
+    def read_like_the_runner(self) -> None:
+        """Every reading the runner's states and failsafes take from the link and the filter."""
+        link = self.link
+        _ = (link.flight_mode, link.armed, link.home_altitude_amsl(), link.battery_percent(), link.status_texts[-2:],
+             link.ack_for(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0), self.estimator.converged)
+        if link.discovered and "HEARTBEAT" in link.latest:
+            link.vehicle_description()
+        if link.acks:  # how the runner names a refused command
+            enum_name("MAV_RESULT", link.acks[-1].result)
+        if self.estimator.time_s is not None:
+            self.estimator.predict_to(self.time_s)
+
+    def decoded(self) -> int:
+        mav = self.link.conn.mav
+        return mav.total_packets_received - mav.total_receive_errors
+
+    def rejected(self) -> int:
+        signing = self.link.signing
+        return self.link.conn.mav.total_receive_errors + (sum(signing.rejected.values()) if signing else 0)
+
+    def details(self) -> dict:
+        """Messages the runner accepted, and the signing rejections by reason."""
+        signing = self.link.signing
+        return {"accepted": self.accepted, "signing_rejected": dict(signing.rejected) if signing else None,
+                "kept_state": self.kept_state()}
+
+    def kept_state(self) -> dict:
+        """How much the receive path keeps: must stay bounded whatever arrives."""
+        conn = self.link.conn
+        return {"latest_types": len(self.link.latest), "status_texts": len(self.link.status_texts),
+                "pymavlink_messages": sum(len(state.messages) for state in conn.sysid_state.values()),
+                "pymavlink_params": sum(len(state.params) for state in conn.param_state.values())}
+
+    def violations(self) -> list[str]:
+        estimate = self.estimator
+        if estimate.time_s is not None and not all(math.isfinite(v) for v in estimate.position_ned):
+            return [f"non-finite pose estimate {estimate.position_ned}"]
+        return []
+
+
+def make_targets(seed: int) -> dict[str, object]:
+    return {"vehicle": VehicleTarget(None, seed), "vehicle_signed": VehicleTarget(TARGET_KEY, seed),
+            "runner": RunnerTarget(None), "runner_signed": RunnerTarget(TARGET_KEY)}
+
+
+# ---------------------------------------------------------------------------------------------- signing attacks
+SIGNING_ATTACKS = ("unsigned", "wrong_key", "replay", "downgrade_mavlink1", "stale")
+
+
+def _arm(value: int) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_command_long_message(1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, value, 0, 0, 0, 0, 0, 0)
+
+
+def signing_attacks(trials: int, seed: int) -> dict:
+    """Each attack ``trials`` times on a signed vehicle with a GPS fix: an ARM command that is unsigned, signed
+    with a random key, a re-sent captured signed ARM (after the owner disarmed), unsigned MAVLink 1, or signed
+    with the right key but a new stream's timestamp over a minute old (a recording from before). Counts how many
+    were rejected by signing and how many took effect (armed the vehicle)."""
+    rng = random.Random(seed)
+    target = VehicleTarget(TARGET_KEY, seed)
+    vehicle = target.vehicle
+    vehicle.run(70.0)  # a GPS fix, and a clock over a minute past the epoch (room for stale timestamps)
+    owner = encoder(255, 190, TARGET_KEY)
+    owner.signing.timestamp = vehicle.signing_timestamp()
+    results = {attack: {"tried": 0, "rejected": 0, "took_effect": 0} for attack in SIGNING_ATTACKS}
+    for _ in range(trials):
+        for attack in SIGNING_ATTACKS:
+            if attack == "unsigned":
+                frame = _arm(1).pack(encoder(255, 190))
+            elif attack == "wrong_key":
+                frame = _arm(1).pack(encoder(255, 190, rng.randbytes(32)))
+            elif attack == "downgrade_mavlink1":
+                frame = _arm(1).pack(encoder(255, 190), force_mavlink1=True)
+            elif attack == "stale":
+                old = encoder(rng.randrange(2, 250), rng.randrange(1, 255), TARGET_KEY)
+                old.signing.timestamp = rng.randrange(vehicle.signing_timestamp() - 61 * 100_000)
+                frame = _arm(1).pack(old)
+            else:  # replay: the owner arms and disarms, the attacker re-sends the captured ARM
+                frame = _arm(1).pack(owner)
+                target.feed(frame)
+                results[attack]["owner_arm_accepted"] = results[attack].get("owner_arm_accepted", 0) + \
+                    vehicle.autopilot.armed  # the control: the same frame, first time, does arm
+                target.feed(_arm(0).pack(owner))
+            rejected_before = sum(vehicle.signing.rejected.values())
+            target.feed(frame)
+            vehicle.step()
+            figures = results[attack]
+            figures["tried"] += 1
+            figures["rejected"] += sum(vehicle.signing.rejected.values()) - rejected_before
+            if vehicle.autopilot.armed:
+                figures["took_effect"] += 1
+                target.feed(_arm(0).pack(owner))
+    for figures in results.values():
+        figures["share_rejected"] = figures["rejected"] / figures["tried"] if figures["tried"] else None
+    return results
+
+
+# ---------------------------------------------------------------------------------------------- the run
+class FrameHang(Exception):
+    """Raised by the watchdog in a frame that has run for INTERRUPT_S."""
+
+
+def _interrupt(signum, frame) -> None:
+    raise FrameHang(f"frame still running after {INTERRUPT_S:g} s")
+
+
+def run(frames: int, seed: int, progress: bool = True) -> dict:
+    rng = random.Random(seed)
+    corpus_frames = corpus(rng)
+    targets = make_targets(seed)
+    stats = {name: {"frames": 0, "crashes": 0, "hangs": 0, "max_frame_ms": 0.0, "violations": 0, "seconds": 0.0}
+             for name in targets}
+    examples: list[dict] = []
+    by_mutation: dict[str, int] = {kind: 0 for kind in MUTATIONS}
+    signal.signal(signal.SIGALRM, _interrupt)
+    started = time.perf_counter()
+    for index in range(frames):
+        kind, data = fuzz_frame(rng, corpus_frames)
+        by_mutation[kind] += 1
+        for name, target in targets.items():
+            figures = stats[name]
+            signal.setitimer(signal.ITIMER_REAL, INTERRUPT_S)
+            begin = time.perf_counter()
+            try:
+                target.feed(data)
+            except Exception as exc:  # noqa: BLE001 - counting what escapes is the point
+                figures["crashes"] += 1
+                if isinstance(exc, FrameHang):
+                    figures["hangs"] += 1
+                if len(examples) < 20:
+                    examples.append({"target": name, "mutation": kind, "error": repr(exc), "frame": data.hex()})
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+            elapsed = time.perf_counter() - begin
+            figures["seconds"] += elapsed
+            figures["frames"] += 1
+            figures["max_frame_ms"] = max(figures["max_frame_ms"], elapsed * 1000.0)
+            if elapsed > HANG_S:
+                figures["hangs"] += 1
+        if index % 1000 == 999:
+            for name, target in targets.items():
+                problems = target.violations()
+                if problems:
+                    stats[name]["violations"] += len(problems)
+                    if len(examples) < 20:
+                        examples.append({"target": name, "violations": problems, "frame_index": index})
+                    targets[name] = make_targets(seed)[name]  # start clean so one violation is not counted forever
+        if progress and index % 10_000 == 9_999:
+            rate = (index + 1) / (time.perf_counter() - started)
+            print(f"\r{index + 1:,}/{frames:,} frames  {rate:,.0f} frames/s", end="", file=sys.stderr, flush=True)
+    if progress:
+        print(file=sys.stderr)
+    for name, target in targets.items():
+        stats[name].update(decoded=target.decoded(), rejected=target.rejected(), **target.details(),
+                           frames_per_s=round(stats[name]["frames"] / max(stats[name]["seconds"], 1e-9)),
+                           max_frame_ms=round(stats[name]["max_frame_ms"], 3), seconds=round(stats[name]["seconds"], 1))
+    return {"frames": frames, "seed": seed, "wall_s": round(time.perf_counter() - started, 1),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "mutations": by_mutation, "targets": stats, "examples": examples,
+            "note": "decoded: messages pymavlink decoded (a fuzzed frame may hold none or several); rejected: pymavlink "
+                    "bad-data events (one frame may make several), frames dropped by signing and (vehicle) partial "
+                    "frames dropped at the end of a datagram; counts are of the last target instance (a target "
+                    "restarts after an invariant violation)"}
+
+
+def print_table(report: dict) -> None:
+    columns = ("frames", "crashes", "hangs", "violations", "decoded", "rejected", "max_frame_ms", "frames_per_s")
+    print(f"\nMAVLink receive-path fuzzing: {report['frames']:,} frames, seed {report['seed']}, "
+          f"{report['wall_s']} s wall, peak RSS {report['peak_rss_mb']} MB")
+    print(f"  {'target':16s}" + "".join(f"{c:>14s}" for c in columns))
+    for name, figures in report["targets"].items():
+        print(f"  {name:16s}" + "".join(f"{figures[c]:>14,}" if isinstance(figures[c], int) else f"{figures[c]:>14}"
+                                        for c in columns))
+    print("  mutations: " + ", ".join(f"{kind} {count:,}" for kind, count in report["mutations"].items()))
+    for example in report["examples"][:5]:
+        print(f"  example: {example}")
+    print("\nSigning attacks on a signed vehicle (an ARM command each):")
+    for attack, figures in report["signing_attacks"].items():
+        print(f"  {attack:20s} tried {figures['tried']:6,}  rejected {figures['rejected']:6,} "
+              f"({figures['share_rejected']:.1%})  took effect {figures['took_effect']}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=1_000_000, help="fuzzed frames (each fed to every target)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--attack-trials", type=int, default=1000, help="tries of each signing attack")
+    parser.add_argument("--out", default="benchmarks/results/fuzz.json")
+    args = parser.parse_args()
+    from common import write_report
+
+    report = run(args.frames, args.seed)
+    report["signing_attacks"] = signing_attacks(args.attack_trials, args.seed)
+    print_table(report)
+    write_report(args.out, {"python": platform.python_version(), **report})
+    failures = sum(t["crashes"] + t["hangs"] + t["violations"] for t in report["targets"].values())
+    failures += sum(a["took_effect"] + a["tried"] - a["rejected"] for a in report["signing_attacks"].values())
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Evaluation of a checkpoint split across workers, with results identical to one serial batch.
+
+Scenario i of the split is flown with episode seed i in every case; the episodes are cut into contiguous
+chunks (one per worker), each chunk is flown as one vectorised batch (:func:`policies.evaluation.run_episodes`)
+and the per-episode arrays are concatenated in order before the metrics are computed. Two things make a chunk's
+episodes bit-identical to the same episodes inside the whole batch:
+
+* everything in the environment is per row (the detection draws come from a generator keyed by the episode
+  seed, the physics and the search state are element-wise numpy), so the other rows of a batch do not matter;
+* the policy's matrix products are: torch's CPU kernels give the same row whatever else is in the batch, except
+  for batches of 1-3 rows, which take a different (matrix-vector) path with another summation order (measured
+  here: the actions of 1-3 rows differ in the last bits from the same rows in a larger batch). Every policy call
+  is therefore padded to at least :data:`MIN_POLICY_ROWS` rows; serial and chunked runs both pad, so both see
+  the same numbers (a meta decision for 2 remaining episodes is a batch of 8 either way).
+
+Workers also compute with one torch thread each (:mod:`autonomy.worker_pool`), as the serial path does.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from autonomy.worker_pool import PoolConfig, contiguous_chunks, run_tasks
+from policies.checkpoint_policy import CheckpointPolicy, checkpoint_file, load_checkpoint_state
+from policies.config import TrainConfig
+from policies.evaluation import episode_batch, run_episodes, summarise
+
+MIN_POLICY_ROWS = 8
+POLICY_STATE_KEYS = ("config", "normalizer", "low", "meta", "step")  # what acting needs (no replay buffers)
+
+
+@dataclass(frozen=True)
+class EpisodeChunk:
+    """Episodes ``slots`` (a contiguous part of ``range(episodes)``) of ``split``, for one worker."""
+
+    policy_state: dict
+    """The checkpoint's networks, normaliser and config (not its replay buffers): workers need no shared disk."""
+    checkpoint: str
+    """Where the state came from (reported, never read by the worker)."""
+    split: str
+    """Scenario split."""
+    episodes: int
+    """Episodes of the whole evaluation (the size of the scenario pool the chunk's episodes index)."""
+    slots: range
+    """The episodes (= scenario indices = episode seeds) this chunk flies."""
+
+
+def padded(fn: Callable[[np.ndarray], np.ndarray], rows: int = MIN_POLICY_ROWS) -> Callable[[np.ndarray], np.ndarray]:
+    """``fn`` on a batch padded (with copies of its first row) to at least ``rows`` rows, cut back after."""
+
+    def call(batch: np.ndarray) -> np.ndarray:
+        count = len(batch)
+        if count == 0 or count >= rows:
+            return fn(batch)
+        filler = np.repeat(batch[:1], rows - count, axis=0)
+        return fn(np.concatenate([batch, filler]))[:count]
+
+    return call
+
+
+def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
+    """The per-episode outcome arrays of one chunk (runs in a worker, or in this process)."""
+    policy = CheckpointPolicy.from_state(chunk.policy_state, Path(chunk.checkpoint))
+    core = episode_batch(chunk.split, chunk.episodes, policy.config.flight, goal_conditioned=policy.hierarchical,
+                         slots=chunk.slots)
+    act = padded(policy.act)
+    return run_episodes(core, lambda batch: act(batch.obs), padded(policy.choose_goals) if policy.hierarchical else None)
+
+
+def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Per-episode arrays of consecutive chunks, concatenated in chunk order."""
+    return {key: np.concatenate([record[key] for record in records]) for key in records[0]}
+
+
+def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None = None,
+                       on_done: Callable[[int, int], None] | None = None) -> dict:
+    """The paper's metrics of the checkpoint at ``path`` (file or run folder) on the first ``episodes``
+    scenarios of ``split``, flown on ``pool`` (default: in this process). ``on_done(chunks_done, chunks)``
+    reports progress."""
+    pool = pool or PoolConfig()
+    path = checkpoint_file(path)
+    state = load_checkpoint_state(path, path)  # a damaged or wrong file is one ValueError naming it
+    policy_state = {key: state[key] for key in POLICY_STATE_KEYS}
+    del state  # the replay buffers can be hundreds of MB; workers get only what acting needs
+    config = TrainConfig.from_dict(policy_state["config"])
+    chunks = [EpisodeChunk(policy_state, str(path), split, episodes, slots)
+              for slots in contiguous_chunks(episodes, pool.workers)]
+    finished = []
+    progress = None if on_done is None else (lambda index, _: (finished.append(index), on_done(len(finished), len(chunks))))
+    record = merge_records(run_tasks(fly_chunk, chunks, pool, progress))
+    return {"algo": config.algo, "preset": config.preset, "seed": config.seed, "checkpoint": str(path),
+            "trained_steps": int(policy_state["step"]), "split": split, "max_steps": config.flight.max_steps,
+            **summarise(record)}
