@@ -68,6 +68,9 @@ class RunnerConfig:
     """Attempts per command before the runner gives up on it."""
     telemetry_timeout_s: float = 3.0
     """No vehicle message for this long = telemetry lost (failsafe)."""
+    link_recovery_s: float = 60.0
+    """After telemetry loss the return command is re-sent (every ``command_timeout_s``) for this long, so a link
+    that comes back within it still brings the vehicle home (PX4 has no data-link-loss action by default)."""
     policy_stall_rtl_s: float = 5.0
     """No fresh policy decision for this long = policy stalled (failsafe: RTL)."""
     failsafe_hold_s: float = 1.0
@@ -86,6 +89,7 @@ class RunnerConfig:
                             ("preflight_timeout_s", 0.1, 600.0), ("takeoff_timeout_s", 1.0, 600.0),
                             ("land_timeout_s", 1.0, 3600.0), ("command_timeout_s", 0.05, 30.0),
                             ("command_retries", 1, 20), ("telemetry_timeout_s", 0.5, 60.0),
+                            ("link_recovery_s", 0.0, 3600.0),
                             ("policy_stall_rtl_s", 0.5, 120.0), ("failsafe_hold_s", 0.0, 30.0),
                             ("low_battery_pct", 0.0, 100.0),
                             ("fence_margin_m", 0.0, 500.0), ("fence_lookahead_s", 0.0, 30.0),
@@ -181,12 +185,14 @@ class MissionRunner:
                 raise MissionAborted(f"{what}: not within {timeout_s:g} s")
             self.tick()
 
-    def command(self, command: int, *params: float, what: str) -> None:
-        """COMMAND_LONG with retries; raises MissionAborted unless the vehicle accepts it."""
+    def command(self, command: int, *params: float, what: str, attempts: int | None = None) -> None:
+        """COMMAND_LONG with retries (``attempts``, default ``command_retries``); raises MissionAborted unless
+        the vehicle accepts it."""
         name = mavlink.enums["MAV_CMD"][command].name
-        for attempt in range(self.config.command_retries):
+        attempts = attempts or self.config.command_retries
+        for attempt in range(attempts):
             sent = self.clock.now()
-            self.link.send_command(command, params, confirmation=attempt)
+            self.link.send_command(command, params, confirmation=min(attempt, 255))
             try:
                 self.wait_until(lambda: self.link.ack_for(command, sent) is not None, self.config.command_timeout_s,
                                 f"{what}: no COMMAND_ACK for {name}")
@@ -198,7 +204,7 @@ class MissionRunner:
             texts = "; ".join(self.link.status_texts[-2:])
             raise MissionAborted(f"{what}: {name} refused ({enum_name('MAV_RESULT', result)})"
                                  + (f": {texts}" if texts else ""))
-        raise MissionAborted(f"{what}: no COMMAND_ACK for {name} after {self.config.command_retries} attempts")
+        raise MissionAborted(f"{what}: no COMMAND_ACK for {name} after {attempts} attempts")
 
     # ------------------------------------------------------------------ the mission
     def run(self) -> dict:
@@ -342,7 +348,10 @@ class MissionRunner:
 
     def _return_and_land(self, reason: str) -> None:
         self._record("RTL", reason)
-        self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch")
+        attempts = self.config.command_retries
+        if self.search_end == "telemetry lost":  # keep asking until the link is back (or link_recovery_s is over)
+            attempts = max(attempts, math.ceil(self.config.link_recovery_s / self.config.command_timeout_s))
+        self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch", attempts=attempts)
         self.streamer.stop()
         self.wait_until(lambda: self.link.flight_mode in ("RTL", "LAND"), 5.0, "RTL in the heartbeat")
         self._record("LAND", "returning")
@@ -350,8 +359,10 @@ class MissionRunner:
         self._record("DONE", "landed and disarmed")
 
     def _abort(self, reason: str) -> None:
-        """After a failed state: return home if flying, else stop."""
-        if self.state in ("OFFBOARD", "SEARCH") and self.link.armed:
+        """After a failed state: return home if flying, else stop. From TAKEOFF too: a takeoff whose ACKs were
+        all lost may still have flown (the vehicle then hovers where it climbed to)."""
+        airborne = self.estimator.time_s is not None and self._altitude_m() > 1.0  # on the ground: auto-disarm
+        if self.state in ("TAKEOFF", "OFFBOARD", "SEARCH") and self.link.armed and airborne:
             try:
                 self._return_and_land(f"abort: {reason}")
             except MissionAborted as exc:

@@ -9,7 +9,11 @@ the vehicle returns with RTL), which is what the gap is measured against, and un
 Scenario i of the split is flown with episode seed i in both (the same detection draws for the same path).
 The environment flies the artifact through the same runtime (``autonomy.policy``) the runner uses.
 
+The replays are independent episodes: ``--workers N`` flies them on N local processes (the same reports as a
+serial run, see docs/scaling.md).
+
 Usage: python benchmarks/sim_to_sitl.py --policy policies/pretrained/hrl-sac.pt [--episodes 50] [--split test]
+       [--workers 2]
 """
 from __future__ import annotations
 
@@ -21,7 +25,8 @@ import numpy as np
 import torch
 
 from autonomy.policy import load_policy
-from autonomy.replay import replay_mission
+from autonomy.parallel_replay import ReplayEpisode, replay_episodes
+from autonomy.worker_pool import PoolConfig
 from missions.mission import FlightSettings, Mission
 from policies.evaluation import episode_batch, run_episodes
 from policies.evaluation_stats import wilson_interval
@@ -34,6 +39,7 @@ def main() -> int:
     parser.add_argument("--policy", default="policies/pretrained/hrl-sac.pt")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--split", default="test", choices=["train", "val", "test"])
+    parser.add_argument("--workers", type=int, default=1, help="local processes flying the replays")
     parser.add_argument("--out", default="benchmarks/results/sim_to_sitl.json")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -47,15 +53,22 @@ def main() -> int:
         for flight_rules in (True, False))
     env_seconds = time.perf_counter() - started
     scenarios = episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical).scenarios
-    replay_success, ends = [], {}
+    episodes = [ReplayEpisode(Mission(scenario=scenario, flight=flight, name=scenario.name), args.policy, seed=i,
+                              out=None, video=False) for i, scenario in enumerate(scenarios)]
+    done: list[dict] = []
+
+    def progress(index: int, report: dict) -> None:
+        done.append(report)
+        print(f"\r  replay {len(done)}/{args.episodes}: {sum(r['success'] for r in done)} found", end="",
+              file=sys.stderr)
+
     started = time.perf_counter()
-    for i, scenario in enumerate(scenarios):
-        report = replay_mission(Mission(scenario=scenario, flight=flight, name=scenario.name), policy, seed=i,
-                                video=False)
-        replay_success.append(report["success"])
-        ends[report["search_end"]] = ends.get(report["search_end"], 0) + 1
-        print(f"\r  replay {i + 1}/{args.episodes}: {sum(replay_success)} found", end="", file=sys.stderr)
+    reports = replay_episodes(episodes, PoolConfig(workers=args.workers), progress)
     print(file=sys.stderr)
+    replay_success = [report["success"] for report in reports]
+    ends: dict[str, int] = {}
+    for report in reports:
+        ends[report["search_end"]] = ends.get(report["search_end"], 0) + 1
     replay_seconds = time.perf_counter() - started
     results = {}
     for name, success in (("environment", np.asarray(env["success"])),
@@ -68,7 +81,7 @@ def main() -> int:
     agree = float(np.mean(np.asarray(env["success"]) == np.asarray(replay_success)))
     print(f"  gap {gap:.1f} points (target <= 5); same outcome in {agree:.0%} of scenarios; replay ends: {ends}")
     write_report(args.out, {"policy": args.policy, "policy_sha256": policy.sha256, "split": args.split,
-                            "episodes": args.episodes, **results, "gap_points": gap, "same_outcome": agree,
+                            "episodes": args.episodes, "workers": args.workers, **results, "gap_points": gap, "same_outcome": agree,
                             "replay_ends": ends, "wall_s": {"environment": env_seconds, "replay": replay_seconds}})
     return 0
 

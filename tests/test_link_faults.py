@@ -18,6 +18,7 @@ import pytest
 from autonomy import mission_cli
 from autonomy.flight_outcome import FlyawayLimits
 from autonomy.policy import Policy, load_policy
+from autonomy.runner import RunnerConfig
 from autonomy.replay import airframe_for, replay_mission, start_point
 from conftest import free_udp_ports
 from missions.mission_file import save_mission
@@ -240,12 +241,12 @@ def policy() -> Policy:
 
 
 def fly(policy: Policy, spec: str, seed: int = 5, vehicle_params: dict | None = None, tmp_path=None,
-        limits: FlyawayLimits = FlyawayLimits()) -> dict:
+        limits: FlyawayLimits = FlyawayLimits(), runner: RunnerConfig = RunnerConfig()) -> dict:
     mission = small_mission()
     config = VehicleConfig(home=start_point(mission), seed=seed, airframe=airframe_for(mission),
                            params=vehicle_params or {})
     return replay_mission(mission, policy, seed=seed, out=tmp_path, video=False, vehicle_config=config,
-                          link_faults=parse_link_faults(spec), limits=limits)
+                          link_faults=parse_link_faults(spec), limits=limits, config=runner)
 
 
 def states(report: dict) -> list[str]:
@@ -296,13 +297,22 @@ def test_a_two_second_outage_trips_the_vehicles_failsafe_then_the_runner_returns
     assert report["search_end"] == "vehicle switched to POSCTL" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
 
 
-def test_a_ten_second_outage_ends_holding_position_with_both_failsafes_recorded(policy):
+def test_a_ten_second_outage_trips_both_failsafes_and_the_return_goes_through_once_the_link_is_back(policy):
     report = fly(policy, "outage=25:10")
     outcome = report["outcome"]
-    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "flying in POSCTL at 20 m"
+    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "landed and disarmed"
     assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.96, abs=0.02)
     assert [f["reason"] for f in report["failsafes"]] == ["telemetry lost for 3.0 s"]
-    # the return command falls into the outage (3 attempts in 4.5 s): the runner gives up and says so
+    assert not [e for e in report["events"] if e["event"] == "abort"]
+    # the return command is re-sent through the outage (link_recovery_s) and accepted after it ends at 35 s
+    rtl, land = (next(t for t in report["transitions"] if t["to"] == state) for state in ("RTL", "LAND"))
+    assert rtl["time_s"] == pytest.approx(28.0, abs=0.1) and 35.0 <= land["time_s"] <= 36.6
+    assert states(report)[-3:] == ["RTL", "LAND", "DONE"]
+
+
+def test_the_runner_gives_up_on_the_return_after_link_recovery_s_and_the_vehicle_holds(policy):
+    report = fly(policy, "outage=25:10", runner=RunnerConfig(link_recovery_s=3.0))
+    assert report["outcome"]["vehicle_end"] == "flying in POSCTL at 20 m"
     aborts = [e["reason"] for e in report["events"] if e["event"] == "abort"]
     assert aborts == ["return to launch: no COMMAND_ACK for MAV_CMD_NAV_RETURN_TO_LAUNCH after 3 attempts"]
 
