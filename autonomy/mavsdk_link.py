@@ -154,6 +154,9 @@ class MavsdkLink:
         return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
+        """MAVSDK sets rates per telemetry topic, not per message: the runner asks only for positions."""
+        if message_id != mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            raise ValueError(f"the MAVSDK backend sets only the position rate, not message {message_id}")
         self._call(self.telemetry.set_rate_position(rate_hz))
 
     def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:

@@ -290,7 +290,7 @@ class MissionRunner:
             self.search_end = "policy returned NaN"
             return
         self._last_decision_s = now
-        vn, ve = self._fence_guard(vn, ve)
+        vn, ve = self._fence_guard(vn, ve, now)
         self.streamer.command(VelocityCommand(vn, ve, self._altitude_hold()), now)
         self._set_zoom(decision.zoom)
 
@@ -311,11 +311,12 @@ class MissionRunner:
             self._event("failsafe", f"the vehicle left OFFBOARD (now {self.link.flight_mode})")
             self.search_end = f"vehicle switched to {self.link.flight_mode}"
 
-    def _fence_guard(self, vn: float, ve: float) -> tuple[float, float]:
+    def _fence_guard(self, vn: float, ve: float, now: float) -> tuple[float, float]:
         """Stop and turn back before the geofence: cancel any velocity component that would cross the margin
-        within the lookahead, and head back inside when already beyond it."""
+        within the lookahead, and head back inside when already beyond it. Judged from the pose predicted to
+        ``now`` (the last fused telemetry is up to a message period old)."""
         fence, margin = self.mission.fence, self.config.fence_margin_m
-        north, east = self.estimator.position_ned[:2]
+        north, east = self.estimator.predict_to(now).position_ned[:2]
         ahead = self.config.fence_lookahead_s
         guarded = []
         for v, pos, low, high in ((vn, north, fence.north_min_m + margin, fence.north_max_m - margin),
