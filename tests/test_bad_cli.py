@@ -170,3 +170,15 @@ def test_bad_arguments_as_a_process():
                             gcs_remote, "--speed", "inf"], "speed must be > 0 and finite")):
         result = subprocess.run([*HRLSAC, *argv], capture_output=True, text=True, timeout=120)
         assert result.returncode == 2 and "Traceback" not in result.stderr and message in result.stderr
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
+    """``hrlsac ... | head -1``: the closed pipe ends the command with 141 (SIGPIPE's code), no error line."""
+    sweep = tmp_path / "many.yaml"
+    sweep.write_text(f"steps: 1000\nseeds: {list(range(5000))}\n")  # a dry run prints one line per run
+    process = subprocess.Popen([*HRLSAC, "sweep", str(sweep), "--dry-run"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE)
+    assert process.stdout.readline().startswith(b"sweep many: 5000 runs")
+    process.stdout.close()  # like head after its first line
+    err = process.stderr.read().decode()
+    assert process.wait(timeout=120) == 141 and err == ""
