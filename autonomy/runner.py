@@ -69,8 +69,9 @@ class RunnerConfig:
     telemetry_timeout_s: float = 3.0
     """No vehicle message for this long = telemetry lost (failsafe)."""
     link_recovery_s: float = 60.0
-    """After telemetry loss the return command is re-sent (every ``command_timeout_s``) for this long, so a link
-    that comes back within it still brings the vehicle home (PX4 has no data-link-loss action by default)."""
+    """The return command (RTL) is re-sent (every ``command_timeout_s``) for this long before the runner gives up:
+    after a telemetry loss or on a lossy link, a link that comes back within it still brings the vehicle home
+    (PX4 has no data-link-loss action by default)."""
     policy_stall_rtl_s: float = 5.0
     """No fresh policy decision for this long = policy stalled (failsafe: RTL)."""
     failsafe_hold_s: float = 1.0
@@ -185,20 +186,26 @@ class MissionRunner:
                 raise MissionAborted(f"{what}: not within {timeout_s:g} s")
             self.tick()
 
-    def command(self, command: int, *params: float, what: str, attempts: int | None = None) -> None:
+    def command(self, command: int, *params: float, what: str, attempts: int | None = None,
+                took_effect: Callable[[], bool] | None = None) -> None:
         """COMMAND_LONG with retries (``attempts``, default ``command_retries``); raises MissionAborted unless
-        the vehicle accepts it."""
+        the vehicle accepts it. ``took_effect``: what the vehicle's heartbeat shows once the command is carried
+        out (armed, the new mode); it counts as acceptance when the ACK itself was lost on a lossy link."""
         name = mavlink.enums["MAV_CMD"][command].name
         attempts = attempts or self.config.command_retries
+        done = took_effect or (lambda: False)
         for attempt in range(attempts):
             sent = self.clock.now()
             self.link.send_command(command, params, confirmation=min(attempt, 255))
             try:
-                self.wait_until(lambda: self.link.ack_for(command, sent) is not None, self.config.command_timeout_s,
-                                f"{what}: no COMMAND_ACK for {name}")
+                self.wait_until(lambda: self.link.ack_for(command, sent) is not None or done(),
+                                self.config.command_timeout_s, f"{what}: no COMMAND_ACK for {name}")
             except MissionAborted:
                 continue
-            result = self.link.ack_for(command, sent).result
+            ack = self.link.ack_for(command, sent)
+            if ack is None:  # no ACK, but the heartbeat shows it done
+                return
+            result = ack.result
             if result == mavlink.MAV_RESULT_ACCEPTED:
                 return
             texts = "; ".join(self.link.status_texts[-2:])
@@ -234,11 +241,11 @@ class MissionRunner:
         self._record("ARM", "pose estimate converged, home known")
 
     def _arm_and_take_off(self) -> None:
-        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming", took_effect=lambda: self.link.armed)
         self._record("TAKEOFF", "armed")
         target_amsl = self.link.home_altitude_amsl() + self.mission.flight.altitude_m
         self.command(mavlink.MAV_CMD_NAV_TAKEOFF, math.nan, 0, 0, math.nan, math.nan, math.nan, target_amsl,
-                     what="takeoff")
+                     what="takeoff", took_effect=lambda: self.link.flight_mode == "TAKEOFF")
         self.wait_until(lambda: self._altitude_m() >= self.mission.flight.altitude_m - 1.5
                         and self.link.flight_mode != "TAKEOFF", self.config.takeoff_timeout_s,
                         f"climbing to {self.mission.flight.altitude_m:g} m")
@@ -248,7 +255,8 @@ class MissionRunner:
         self.streamer.start(self.clock.now(), HOLD)
         started = self.clock.now()
         self.wait_until(lambda: self.clock.now() - started >= self.config.offboard_lead_s, 10.0, "setpoint lead")
-        self.command(mavlink.MAV_CMD_DO_SET_MODE, *OFFBOARD_MODE, what="switching to OFFBOARD")
+        self.command(mavlink.MAV_CMD_DO_SET_MODE, *OFFBOARD_MODE, what="switching to OFFBOARD",
+                     took_effect=lambda: self.link.flight_mode == "OFFBOARD")
         self.wait_until(lambda: self.link.flight_mode == "OFFBOARD", 3.0, "OFFBOARD in the heartbeat")
         self._record("SEARCH", f"OFFBOARD after {self.streamer.sent} setpoints")
 
@@ -349,10 +357,10 @@ class MissionRunner:
 
     def _return_and_land(self, reason: str) -> None:
         self._record("RTL", reason)
-        attempts = self.config.command_retries
-        if self.search_end == "telemetry lost":  # keep asking until the link is back (or link_recovery_s is over)
-            attempts = max(attempts, math.ceil(self.config.link_recovery_s / self.config.command_timeout_s))
-        self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch", attempts=attempts)
+        # The one command that must get through: keep asking until the link is back (or link_recovery_s is over).
+        attempts = max(self.config.command_retries, math.ceil(self.config.link_recovery_s / self.config.command_timeout_s))
+        self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch", attempts=attempts,
+                     took_effect=lambda: self.link.flight_mode in ("RTL", "LAND"))
         self.streamer.stop()
         self.wait_until(lambda: self.link.flight_mode in ("RTL", "LAND"), 5.0, "RTL in the heartbeat")
         self._record("LAND", "returning")

@@ -14,8 +14,10 @@ import time
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy import mission_cli
+from autonomy import replay as replay_module
 from autonomy.flight_outcome import FlyawayLimits
 from autonomy.policy import Policy, load_policy
 from autonomy.runner import RunnerConfig
@@ -315,6 +317,34 @@ def test_the_runner_gives_up_on_the_return_after_link_recovery_s_and_the_vehicle
     assert report["outcome"]["vehicle_end"] == "flying in POSCTL at 20 m"
     aborts = [e["reason"] for e in report["events"] if e["event"] == "abort"]
     assert aborts == ["return to launch: no COMMAND_ACK for MAV_CMD_NAV_RETURN_TO_LAUNCH after 3 attempts"]
+
+
+class AckSwallowingLink:
+    """The vehicle's end of the link with every COMMAND_ACK it sends lost: a lossy downlink at its worst for
+    commands (they arrive and are carried out; their answers never do)."""
+
+    def __init__(self, link):
+        self.link, self.swallowed = link, 0
+
+    def send(self, data: bytes) -> None:
+        if data[:1] == b"\xfd" and int.from_bytes(data[7:10], "little") == mavlink.MAVLINK_MSG_ID_COMMAND_ACK:
+            self.swallowed += 1
+            return
+        self.link.send(data)
+
+    def receive(self) -> list[bytes]:
+        return self.link.receive()
+
+    def counts(self) -> dict:
+        return {"acks_swallowed": self.swallowed}
+
+
+def test_commands_whose_acks_are_all_lost_count_as_done_once_the_heartbeat_shows_them(policy, monkeypatch):
+    monkeypatch.setattr(replay_module, "apply_faults", lambda links, faults, clock, seed: [AckSwallowingLink(links[0])])
+    report = fly(policy, "")
+    assert report["outcome"]["outcome"] == "completed" and report["outcome"]["vehicle_end"] == "landed and disarmed"
+    assert states(report) == ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]
+    assert report["link_packets"]["acks_swallowed"] >= 4  # arm, takeoff, offboard, RTL (and any zoom commands)
 
 
 @pytest.mark.parametrize("action, mode", [(0, "POSCTL"), (3, "RTL"), (4, "LAND")])
