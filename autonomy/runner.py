@@ -358,7 +358,8 @@ class MissionRunner:
     def _return_and_land(self, reason: str) -> None:
         self._record("RTL", reason)
         # The one command that must get through: keep asking until the link is back (or link_recovery_s is over).
-        attempts = max(self.config.command_retries, math.ceil(self.config.link_recovery_s / self.config.command_timeout_s))
+        config = self.config
+        attempts = max(config.command_retries, math.ceil(config.link_recovery_s / config.command_timeout_s))
         self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch", attempts=attempts,
                      took_effect=lambda: self.link.flight_mode in ("RTL", "LAND"))
         self.streamer.stop()
