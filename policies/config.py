@@ -132,9 +132,11 @@ class TrainConfig:
     """Share of the extrinsic reward added to the low-level reward (0 = purely intrinsic, as the paper), without
     its constant per-step cost: with that cost, ending the episode early by leaving the area (-10 once) is worth
     about as much as a long flight, and a pilot run learned to leave (the time cost is the meta-controller's)."""
-    coverage_bonus: float = 0.1
+    coverage_bonus: float = 0.3
     """Low-level reward per newly covered grid cell (0 = none): the only part of the low-level reward that pays
-    for keeping the search sensor on (a cell counts as covered only with the sensor on)."""
+    for keeping the search sensor on (a cell counts as covered only with the sensor on). Measured, HRL-SAC,
+    default preset, 100,000 steps, 3 seeds, 500 test episodes: 0.1 -> 17.0 % success, the deterministic low level
+    keeping the sensor mostly off (detection 3.9 %); 0.3 -> 22.9 %, detection 16 % (seed 0); 1.0 -> 20.4 % (seed 0)."""
 
     # --- bookkeeping
     checkpoint_every: int = 20_000
