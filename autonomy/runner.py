@@ -371,7 +371,7 @@ class MissionRunner:
     def _abort(self, reason: str) -> None:
         """After a failed state: return home if flying, else stop. From TAKEOFF too: a takeoff whose ACKs were
         all lost may still have flown (the vehicle then hovers where it climbed to)."""
-        airborne = self.estimator.time_s is not None and self._altitude_m() > 1.0  # on the ground: auto-disarm
+        airborne = self._altitude_m() > 1.0  # on the ground the vehicle disarms itself (COM_DISARM_PRFLT)
         if self.state in ("TAKEOFF", "OFFBOARD", "SEARCH") and self.link.armed and airborne:
             try:
                 self._return_and_land(f"abort: {reason}")

@@ -21,6 +21,7 @@ import torch
 
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
+from policies.parallel_evaluation import padded
 
 from common import write_report
 
@@ -52,7 +53,7 @@ def main() -> int:
     def goals(sample: bool):
         if not policy.hierarchical:
             return None
-        return lambda meta_obs: policy.meta.act(normalise(meta_obs), deterministic=not sample)
+        return padded(lambda meta_obs: policy.meta.act(normalise(meta_obs), deterministic=not sample))
 
     variants = {"deterministic": (deterministic, goals(False)), "sampled_low_level": (sampled, goals(False)),
                 "intensity_forced_on": (sensor_on, goals(False))}
@@ -61,7 +62,8 @@ def main() -> int:
     results = {}
     for name, (act, choose_goals) in variants.items():
         core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
-        metrics = summarise(run_episodes(core, lambda batch: act(batch.obs), choose_goals))
+        # padded as in hrlsac evaluate, so the deterministic variant is exactly the evaluation's policy
+        metrics = summarise(run_episodes(core, lambda batch, act=padded(act): act(batch.obs), choose_goals))
         results[name] = {key: metrics[key] for key in ("success_rate", "success_ci95", "coverage_mean",
                                                        "detection_rate", "out_of_bounds_rate", "collision_rate")}
         low, high = metrics["success_ci95"]

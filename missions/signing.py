@@ -32,7 +32,7 @@ TIMESTAMP_UNITS_PER_S = 100_000  # the signing timestamp counts 10-microsecond u
 NEW_STREAM_MAX_AGE = 60 * TIMESTAMP_UNITS_PER_S  # the spec's one minute
 SIGNATURE_LEN = 13  # link id + 6-byte timestamp + 6-byte signature
 SIGNED_FLAG = 0x01  # MAVLINK_IFLAG_SIGNED in incompat_flags
-MAVLINK1_MARKER, MAVLINK2_MARKER = 0xFE, 0xFD
+MAVLINK1_MARKER = 0xFE
 _MAX_KEY_FILE_BYTES = 256  # a key file is 65 bytes; anything much larger is not one (and is not read whole)
 
 # Verdicts of SignatureVerifier.check (also the keys of the rejection counters).
@@ -221,10 +221,12 @@ class LinkSigning:
     def install(self, mav, link_id: int = 0) -> None:
         """Make the pymavlink ``MAVLink`` object ``mav`` sign everything it sends with our key and clock
         (again if it was installed before: a no-op then)."""
-        if any(encoder is mav for encoder in self._encoders) and isinstance(mav.signing, _ClockedSigning):
+        known = any(encoder is mav for encoder in self._encoders)
+        if known and isinstance(mav.signing, _ClockedSigning):
             return
         mav.signing = _ClockedSigning(self.key, link_id, self.now)
-        self._encoders.append(mav)
+        if not known:
+            self._encoders.append(mav)
 
     def replace_key(self, key: bytes, initial_timestamp: int = 0) -> None:
         """Switch to a new key (SETUP_SIGNING): new frames are signed and checked with it, streams start over."""

@@ -19,7 +19,6 @@ PX4_UNSIGNED_ALLOW_LIST = frozenset({
     mavlink.MAVLINK_MSG_ID_ADSB_VEHICLE,
     mavlink.MAVLINK_MSG_ID_COLLISION,
 })
-SETUP_SIGNING_ARMED = "setup_signing_armed"  # rejection reason: a key change asked for in flight
 
 
 def vehicle_signing(key: bytes, now: Callable[[], int]) -> LinkSigning:
