@@ -95,6 +95,12 @@ class TrainConfig:
     initial_alpha: float = 0.2
     """Initial entropy temperature of both levels."""
 
+    update_dtype: str = "float32"
+    """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "float32", or "bfloat16"
+    (CPU autocast; weights, optimiser state, outputs and losses stay float32, acting stays float32). bfloat16 is
+    faster on CPUs with AVX-512 BF16 or AMX (benchmarks/train_speed.py) and rounds differently: a run is still
+    reproducible, but not bit-equal to a float32 run."""
+
     # --- prioritised replay (both levels)
     per_alpha: float = 0.6
     """How strongly priorities skew sampling (0 = uniform)."""
@@ -118,6 +124,8 @@ class TrainConfig:
     """Meta entropy target = scale * log(4): high enough that the meta-policy never collapses."""
     meta_min_alpha: float = 1e-3
     """Floor on the meta temperature, a second guard against a deterministic meta-policy."""
+    meta_updates_per_transition: int = 1
+    """Meta-controller gradient updates per completed meta transition (one every K steps per environment)."""
     intrinsic_reward: str = "progress"
     """Low-level reward towards the goal point g: "distance" is the paper's -||s' - g|| / intrinsic_scale_m;
     "progress" is (||s - g|| - ||s' - g||) / intrinsic_scale_m, the same signal as potential-based shaping.
@@ -127,7 +135,9 @@ class TrainConfig:
     """Metres per unit of intrinsic reward. 10 m makes a full-speed step towards g worth +1: at 100 m the signal
     (+0.1) drowned in the entropy bonus and the low level hardly moved (HRL-SAC, seed 0, 40,000 steps)."""
     intrinsic_goal_bonus: float = 1.0
-    """Added to the intrinsic reward on the step the low level comes within reach of its sub-goal."""
+    """Added to the intrinsic reward on the step the low level completes its sub-goal: it comes within reach of
+    the point and the goal, grounded again, points elsewhere (the cell got searched, the search moved on).
+    Being within reach of a point that stays put (sensor off over an unsearched cell, home) earns nothing."""
     extrinsic_weight: float = 0.0
     """Share of the extrinsic reward added to the low-level reward (0 = purely intrinsic, as the paper), without
     its constant per-step cost: with that cost, ending the episode early by leaving the area (-10 once) is worth
@@ -153,12 +163,15 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ("hrl-sac", "sac"):
             raise ValueError(f"TrainConfig.algo must be 'hrl-sac' or 'sac', got {self.algo!r}")
+        if self.update_dtype not in ("float32", "bfloat16"):
+            raise ValueError(f"TrainConfig.update_dtype must be 'float32' or 'bfloat16', got {self.update_dtype!r}")
         if self.intrinsic_reward not in ("progress", "distance"):
             raise ValueError(f"TrainConfig.intrinsic_reward must be 'progress' or 'distance', "
                              f"got {self.intrinsic_reward!r}")
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
-                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1)):
+                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1),
+                                ("meta_updates_per_transition", 1, 64)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 raise ValueError(f"TrainConfig.{name} must be an integer in [{low}, {high}], got {value!r}")

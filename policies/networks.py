@@ -50,6 +50,20 @@ def mlp(in_dim: int, net: NetworkConfig, out_dim: int) -> nn.Sequential:
     return nn.Sequential(*hidden_layers(in_dim, net), nn.Linear(net.layers[-1], int(out_dim)))
 
 
+def float32_output(net: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """``net(x)`` with the last layer (the output) in float32, also inside a bfloat16 autocast region.
+
+    Under ``TrainConfig.update_dtype = "bfloat16"`` the hidden layers run their matrix products in bfloat16; the
+    outputs (Q-values, action means) keep float32 precision because small differences between them are the
+    whole learning signal (bfloat16 resolves Q = 50 only to 0.25). Outside autocast this is exactly ``net(x)``.
+    """
+    layers = list(net)
+    for layer in layers[:-1]:
+        x = layer(x)
+    with torch.autocast("cpu", enabled=False):
+        return layers[-1](x.float())
+
+
 # ---------------------------------------------------------------------------------------------------- actors
 class SquashedGaussianActor(nn.Module):
     """Gaussian policy squashed by tanh into [-1, 1]^act_dim (SAC, Haarnoja et al. 2018, appendix C).
@@ -72,8 +86,10 @@ class SquashedGaussianActor(nn.Module):
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, obs_dim) -> pre-tanh mean (B, act_dim), log_std (B, act_dim) clamped to ``log_std_bounds``."""
         h = self.trunk(obs)
-        # A hard clamp (as the paper's "clipped Gaussian"); the bounds are wide enough that it rarely binds.
-        return self.mean(h), self.log_std(h).clamp(self.log_std_min, self.log_std_max)
+        with torch.autocast("cpu", enabled=False):  # the heads in float32 (see float32_output)
+            h = h.float()
+            # A hard clamp (as the paper's "clipped Gaussian"); the bounds are wide enough that it rarely binds.
+            return self.mean(h), self.log_std(h).clamp(self.log_std_min, self.log_std_max)
 
     def sample(self, obs: torch.Tensor, generator: torch.Generator | None = None
                ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -121,7 +137,7 @@ class TwinQ(nn.Module):
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, obs_dim), (B, act_dim) with act in the unit range [-1, 1] -> q1 (B,), q2 (B,)."""
         x = torch.cat([obs, act], dim=-1)
-        return self.q1(x).squeeze(-1), self.q2(x).squeeze(-1)
+        return float32_output(self.q1, x).squeeze(-1), float32_output(self.q2, x).squeeze(-1)
 
 
 class TwinQDiscrete(nn.Module):

@@ -496,3 +496,46 @@ def test_the_low_level_and_flat_sac_discount_by_their_own_gamma():
     assert TrainConfig.from_preset("paper").sac_gamma == 0.99  # the paper's table
     with pytest.raises(ValueError, match="TrainConfig.low_level_gamma must be in"):
         TrainConfig(low_level_gamma=1.5)
+
+
+# ---------------------------------------------------------------------------------------------------- precision
+def test_bfloat16_updates_keep_float32_outputs_and_track_the_float32_update():
+    """update_dtype="bfloat16": the hidden matrix products round to bfloat16, the Q-values and losses stay float32,
+    weights stay float32, the step is close to the float32 one (not equal), and the bandit is still learned."""
+    rng = np.random.default_rng(3)
+    batch = continuous_batch(rng, 64)
+    agents = {dtype: SAC(3, 2, LOW2, HIGH2, small_config(update_dtype=dtype), seed=0) for dtype in ("float32",
+                                                                                                  "bfloat16")}
+    results = {dtype: agent.update(batch) for dtype, agent in agents.items()}
+    td32, td16 = results["float32"][0], results["bfloat16"][0]
+    assert td16.dtype == np.float32
+    assert not np.array_equal(td32, td16)  # bfloat16 really ran
+    np.testing.assert_allclose(td16, td32, rtol=0.05, atol=0.02)
+    for p32, p16 in zip(agents["float32"].critic.parameters(), agents["bfloat16"].critic.parameters()):
+        assert p16.dtype == torch.float32
+        assert (p16 - p32).abs().max() < 1e-3  # one Adam step of ~lr = 3e-4, in the same direction
+    with torch.autocast("cpu", dtype=torch.bfloat16):  # outputs are float32 even inside autocast
+        q1, _ = agents["bfloat16"].critic(torch.zeros(4, 3), torch.zeros(4, 2))
+        mean, log_std = agents["bfloat16"].actor(torch.zeros(4, 3))
+    assert q1.dtype == mean.dtype == log_std.dtype == torch.float32
+
+
+def test_bfloat16_updates_are_reproducible_and_resume_bit_identically():
+    rng = np.random.default_rng(5)
+    batches = [continuous_batch(rng, 16) for _ in range(3)]
+    cfg = small_config(update_dtype="bfloat16")
+    a, b = SAC(3, 2, LOW2, HIGH2, cfg, seed=1), SAC(3, 2, LOW2, HIGH2, cfg, seed=1)
+    for batch in batches[:2]:
+        a.update(batch)
+        b.update(batch)
+    restored = SAC(3, 2, LOW2, HIGH2, cfg, seed=2)
+    restored.load_state_dict(copy.deepcopy(a.state_dict()))
+    outcomes = [agent.update(batches[2]) for agent in (a, b, restored)]
+    for td, metrics in outcomes[1:]:
+        np.testing.assert_array_equal(td, outcomes[0][0])
+        assert metrics == outcomes[0][1]
+
+
+def test_update_dtype_is_validated():
+    with pytest.raises(ValueError, match="TrainConfig.update_dtype must be 'float32' or 'bfloat16', got 'float16'"):
+        TrainConfig(update_dtype="float16")

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from missions.goals import SEARCH_LOCATION
 from missions.mission import FlightSettings
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
@@ -81,6 +82,23 @@ def test_meta_transitions_carry_k_step_discounted_returns(tmp_path):
     assert trainer.needs_goal.all()
 
 
+@pytest.mark.parametrize("per_transition", [1, 3])
+def test_meta_updates_run_per_completed_meta_transition(tmp_path, per_transition):
+    config = small_config("hrl-sac", total_steps=600, warmup_steps=100, meta_updates_per_transition=per_transition)
+    trainer = Trainer(config, tmp_path)
+    learning_transitions, real_learn = [], trainer.learn
+
+    def count(meta_transitions):  # transitions completed once meta learning is on (warm-up over, a batch stored)
+        if trainer.step >= config.warmup_steps and len(trainer.meta_buffer) >= config.meta_batch_size:
+            learning_transitions.append(meta_transitions)
+        real_learn(meta_transitions)
+
+    trainer.learn = count
+    trainer.run(progress=False)
+    assert sum(learning_transitions) > 10
+    assert trainer.meta.num_updates == per_transition * sum(learning_transitions)
+
+
 @pytest.mark.parametrize("kind, coverage_bonus", [("progress", 0.0), ("distance", 0.0), ("progress", 0.5)])
 def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
@@ -102,7 +120,9 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
     toward = captured["before"] - distance if kind == "progress" else -distance
     assert kind == "distance" or np.all(np.abs(toward) < 20.0)  # one step of flight, not a distance
     newly_covered = info["coverage_ratio"] * 1024  # the grid was empty before the first step
-    expected = toward / 100.0 + (distance <= config.flight.reach_radius_m) + coverage_bonus * newly_covered
+    moved_on = np.hypot(*(trainer.env.core.goal_point - info["goal_point"]).T) > config.flight.reach_radius_m
+    completed = (distance <= config.flight.reach_radius_m) & moved_on
+    expected = toward / 100.0 + completed + coverage_bonus * newly_covered
     np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], expected, rtol=1e-5, atol=1e-7)
 
 
@@ -182,3 +202,38 @@ def test_a_terminated_training_saves_its_checkpoint_and_resumes(tmp_path):
     assert state["step"] >= 200
     resumed = Trainer(TrainConfig.from_dict(json.loads((run / "config.json").read_text())), run, resume=True)
     assert resumed.step == state["step"]
+
+
+def test_the_goal_bonus_pays_for_a_searched_cell_not_for_hovering_at_it(tmp_path):
+    """SearchSpecificLocation: fly to the point with the sensor off and hover there: no bonus however long (the
+    cell stays unsearched, the goal stays put); switch the sensor on: the cell is searched, the goal moves on,
+    and that step earns the bonus once."""
+    config = small_config("hrl-sac", warmup_steps=0, coverage_bonus=0.0, intrinsic_goal_bonus=5.0,
+                          flight=FlightSettings(max_steps=1_000, subgoal_interval=1_000))
+    trainer = Trainer(config, tmp_path)
+    trainer.meta.act = lambda obs: np.full(len(obs), SEARCH_LOCATION)
+    sensor = {"intensity": 0.0}
+
+    def fly_to_goal(obs):
+        core = trainer.env.core
+        velocity = (core.goal_point - core.position) / config.flight.max_speed_mps
+        velocity /= np.maximum(1.0, np.linalg.norm(velocity, axis=1, keepdims=True))
+        return np.column_stack([velocity, np.full(len(velocity), sensor["intensity"]), np.zeros(len(velocity))])
+
+    trainer.low.act = fly_to_goal
+    radius = config.flight.reach_radius_m
+    rewards, at_goal = [], []
+    for _ in range(300):
+        trainer.collect()
+        rewards.append(trainer.low_buffer.data["reward"][len(trainer.low_buffer) - 2:len(trainer.low_buffer)].copy())
+        at_goal.append(np.hypot(*(trainer.env.core.position - trainer.env.core.goal_point).T) <= radius)
+    rewards, at_goal = np.array(rewards), np.array(at_goal)
+    assert at_goal[-50:].all()  # both drones arrived and hover within reach of their point
+    assert rewards[-50:].max() < 1.0  # progress only (metres / 10 per step): never the bonus of 5
+
+    point_before = trainer.env.core.goal_point.copy()
+    sensor["intensity"] = 1.0
+    trainer.collect()
+    reward = trainer.low_buffer.data["reward"][len(trainer.low_buffer) - 2:len(trainer.low_buffer)]
+    assert np.all(np.hypot(*(trainer.env.core.goal_point - point_before).T) > radius)  # the search moved on
+    assert np.all(reward > 4.0)  # the bonus, paid for completing the sub-goal
