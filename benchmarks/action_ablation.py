@@ -4,9 +4,11 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
   * deterministic: the evaluation's policy (tanh of the mean, both levels);
   * sampled_low_level: the low level's actions sampled from its squashed Gaussian (seeded generator);
   * intensity_forced_on: deterministic, but search intensity always 1 (the sensor always on);
+  * full_speed: deterministic, but the movement command scaled to full speed in the policy's direction;
   * sampled_meta (HRL-SAC only): deterministic low level, goals sampled from the meta-controller's softmax.
 
-A large gain from sampling or from forcing the sensor on says the learned deterministic action, not the
+It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
+mean zoom, goal shares). A large gain from sampling, from forcing the sensor on or from full speed says the learned deterministic action, not the
 policy's knowledge of where to fly, is what fails (docs/results/README.md).
 
 Usage: python benchmarks/action_ablation.py RUN [--episodes 300] [--split test] [--out FILE]
@@ -19,13 +21,15 @@ import sys
 import numpy as np
 import torch
 
+from missions.goals import GOAL_NAMES
+from missions.search import SENSOR_ON_INTENSITY
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
 from policies.parallel_evaluation import padded
 
 from common import write_report
 
-SEARCH_INTENSITY = 2  # action component (docs/environment.md)
+MOVEMENT, SEARCH_INTENSITY, CAMERA_ZOOM = slice(0, 2), 2, 3  # action components (docs/environment.md)
 
 
 def main() -> int:
@@ -50,27 +54,62 @@ def main() -> int:
         actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
+    def full_speed(obs: np.ndarray) -> np.ndarray:
+        actions = deterministic(obs).copy()
+        movement = actions[:, MOVEMENT]
+        actions[:, MOVEMENT] = movement / np.maximum(np.linalg.norm(movement, axis=1, keepdims=True), 1e-6)
+        return actions
+
     def goals(sample: bool):
         if not policy.hierarchical:
             return None
         return padded(lambda meta_obs: policy.meta.act(normalise(meta_obs), deterministic=not sample))
 
     variants = {"deterministic": (deterministic, goals(False)), "sampled_low_level": (sampled, goals(False)),
-                "intensity_forced_on": (sensor_on, goals(False))}
+                "intensity_forced_on": (sensor_on, goals(False)), "full_speed": (full_speed, goals(False))}
     if policy.hierarchical:
         variants["sampled_meta"] = (deterministic, goals(True))
-    results = {}
+    results, seen_actions, seen_goals, lengths = {}, [], [], None
     for name, (act, choose_goals) in variants.items():
         core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
-        # padded as in hrlsac evaluate, so the deterministic variant is exactly the evaluation's policy
-        metrics = summarise(run_episodes(core, lambda batch, act=padded(act): act(batch.obs), choose_goals))
+        record = name == "deterministic"  # what the evaluation's policy does: actions and goals, recorded
+        policy_act = padded(act)  # padded as in hrlsac evaluate, so this variant is exactly the evaluation's policy
+
+        def act_on(batch, policy_act=policy_act, record=record):
+            actions = policy_act(batch.obs)
+            if record:
+                seen_actions.append((batch.steps.copy(), actions))
+            return actions
+
+        def goals_for(meta_obs, choose_goals=choose_goals, record=record):
+            chosen = choose_goals(meta_obs)
+            if record:
+                seen_goals.append(np.asarray(chosen))
+            return chosen
+
+        outcome = run_episodes(core, act_on, goals_for if choose_goals is not None else None)
+        if record:
+            lengths = outcome["length"]
+        metrics = summarise(outcome)
         results[name] = {key: metrics[key] for key in ("success_rate", "success_ci95", "coverage_mean",
                                                        "detection_rate", "out_of_bounds_rate", "collision_rate")}
         low, high = metrics["success_ci95"]
         print(f"  {name:20s} success {metrics['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  coverage "
               f"{metrics['coverage_mean']:.1%}  detection {metrics['detection_rate']:.1%}")
+    # Every slot is stepped until the last episode ends: keep only the steps inside each slot's own episode.
+    actions = np.concatenate([a[steps < lengths] for steps, a in seen_actions])
+    behaviour = {"mean_movement_command": float(np.linalg.norm(actions[:, MOVEMENT], axis=1).mean()),
+                 "sensor_on_share": float((actions[:, SEARCH_INTENSITY] >= SENSOR_ON_INTENSITY).mean()),
+                 "mean_zoom": float(actions[:, CAMERA_ZOOM].mean())}
+    if seen_goals:
+        chosen = np.concatenate(seen_goals)
+        behaviour["goal_shares"] = {name: float(np.mean(chosen == i)) for i, name in enumerate(GOAL_NAMES)}
+    print("  deterministic policy: mean movement command {mean_movement_command:.2f} of full speed, sensor on in "
+          "{sensor_on_share:.0%} of steps, mean zoom {mean_zoom:.2f}".format(**behaviour)
+          + ("; goals " + ", ".join(f"{k} {v:.0%}" for k, v in behaviour["goal_shares"].items()) if seen_goals else ""))
     write_report(args.out, {"run": args.run, "algo": policy.config.algo, "trained_steps": policy.step,
-                            "split": args.split, "episodes": args.episodes, "variants": results})
+                            "split": args.split, "episodes": args.episodes, "variants": results,
+                            "deterministic_behaviour": behaviour})
     return 0
 
 
