@@ -34,6 +34,7 @@ from test_runner import small_mission
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 TICK_S = 0.01
 SEARCH_START_S = 16.65  # the small mission's SEARCH begins here for seed 5 (tests below check it)
+LONGEST_OUTAGE_END_S = 25.0 + 10.0  # the outages below start 25 s into the flight and last up to 10 s
 
 
 class StepClock:
@@ -260,7 +261,7 @@ def test_the_clean_mission_completes_and_the_outages_below_fall_in_its_search(po
     assert report["outcome"]["outcome"] == "completed" and report["outcome"]["vehicle_end"] == "landed and disarmed"
     search = next(t["time_s"] for t in report["transitions"] if t["to"] == "SEARCH")
     rtl = next(t["time_s"] for t in report["transitions"] if t["to"] == "RTL")
-    assert search == SEARCH_START_S and rtl > SEARCH_START_S + 30.0
+    assert search == SEARCH_START_S and rtl > LONGEST_OUTAGE_END_S  # every outage tested here hits the search
     assert report["link_faults"] == "none" and report["complete"] is True
 
 
