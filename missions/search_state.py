@@ -51,6 +51,9 @@ class StepOutcome:
     out_of_bounds: np.ndarray
     distance_to_victim_m: np.ndarray
     goal_reached: np.ndarray
+    goal_moved_on: np.ndarray
+    """Reached, and the goal grounded again points more than the reach radius away: the search moved on (an
+    unsearched cell reached with the sensor off stays unsearched, and its goal grounds to the same point)."""
     step_goal_point: np.ndarray
     """(N, 2) the goal point this step flew towards (before any re-grounding)."""
 
@@ -152,7 +155,8 @@ class SearchState:
         goal_reached = (self.goal != NO_GOAL) & (np.hypot(*(position - step_goal_point).T) <= flight.reach_radius_m)
         if goal_reached.any():
             self.ground(goal_reached)
-        return StepOutcome(success, collision, out_of_bounds, distance, goal_reached, step_goal_point)
+        moved_on = goal_reached & (np.hypot(*(self.goal_point - step_goal_point).T) > flight.reach_radius_m)
+        return StepOutcome(success, collision, out_of_bounds, distance, goal_reached, moved_on, step_goal_point)
 
     @property
     def coverage_ratio(self) -> np.ndarray:

@@ -205,6 +205,8 @@ class SarSearchBatch(SearchState):
                 "distance_to_victim_m": out.distance_to_victim_m, "coverage_ratio": self.coverage_ratio,
                 "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,
                 "position": self.position, "goal_point": out.step_goal_point, "goal_reached": out.goal_reached,
+                # A sub-goal is completed when reaching it moves the search on, or on the episode's last step.
+                "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
                 "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 

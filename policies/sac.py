@@ -79,8 +79,7 @@ class SAC(CheckpointedAgent):
 
         lr = config.learning_rate
         # fused=True: one kernel per optimiser step for all of a network's tensors, without the temporaries of
-        # torch's per-tensor (CPU default) or foreach paths: the Adam step went from about a sixth of an update
-        # to a thirtieth (benchmarks/train_speed.py). It rounds differently from those paths (same arithmetic).
+        # torch's per-tensor (CPU default) or foreach paths. It rounds differently from those (same arithmetic).
         self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True)
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=lr, fused=True)
         self.alpha_optim = torch.optim.Adam([self.log_alpha], lr=lr)
