@@ -9,7 +9,8 @@ with one gradient update of batch 128 per environment step, one environment, one
   * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
   * ours_bf16, ours_noln_bf16: the two above with ``TrainConfig.update_dtype="bfloat16"`` (the hidden layers'
                matrix products of each update in bfloat16 under CPU autocast; weights, Adam, outputs and losses
-               float32). The same work per step; faster where the CPU has AVX-512 BF16 or AMX.
+               float32). The same work per step; the speed-up needs AVX-512 BF16 or AMX (this machine has
+               AVX-512 BF16).
   * sb3:       stable_baselines3.SAC("MlpPolicy", train_freq=1, gradient_steps=1, batch_size=128,
                learning_starts=--warmup, net_arch=hidden widths, device="cpu") on policies.env.SarSearchEnv.
   * ours_vec8: extra line, NOT the same work: our vectorised configuration, num_envs=8 and updates_per_step=0.125

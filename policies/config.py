@@ -99,9 +99,9 @@ class TrainConfig:
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
     weights, Adam, outputs and losses stay float32, acting stays float32) or "float32" (the paper preset). On this
     machine's AVX-512 BF16 CPU bfloat16 trains flat SAC at the default preset at 1.58x the float32 steps/s
-    (benchmarks/train_speed.py: 148.6 against 94.2) and learned as well (HRL-SAC seed 0, 100,000 steps: 29.0 % test success against
-    29.0 % in float32); on CPUs without AVX-512 BF16 or AMX it is slower: choose "float32" there. The two round
-    differently: each is reproducible, they are not bit-equal."""
+    (benchmarks/train_speed.py: 148.6 against 94.2) and learned as well (HRL-SAC seed 0, 100,000 steps: 29.0 %
+    test success in both). On CPUs without AVX-512 BF16 or AMX it may be slower (not measured): try "float32"
+    there. The two round differently: each is reproducible, they are not bit-equal."""
 
     # --- prioritised replay (both levels)
     per_alpha: float = 0.6
@@ -199,7 +199,8 @@ class TrainConfig:
         elif name == "paper":
             big = NetworkConfig(hidden=(512, 512, 512), head=256, layer_norm=True, dropout=0.1)
             meta = NetworkConfig(hidden=(256, 256), layer_norm=True, dropout=0.1)
-            base = cls(preset="paper", low_level_gamma=0.99, update_dtype="float32", actor=big, critic=NetworkConfig(hidden=(512, 512), head=256, dropout=0.1),
+            base = cls(preset="paper", low_level_gamma=0.99, update_dtype="float32", actor=big,
+                       critic=NetworkConfig(hidden=(512, 512), head=256, dropout=0.1),
                        meta_actor=meta, meta_critic=meta, flight=FlightSettings(max_steps=10_000))
         else:
             raise ValueError(f"unknown preset {name!r} (choose from default, paper)")
