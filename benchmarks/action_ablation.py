@@ -5,7 +5,12 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
   * sampled_low_level: the low level's actions sampled from its squashed Gaussian (seeded generator);
   * intensity_forced_on: deterministic, but search intensity always 1 (the sensor always on);
   * full_speed: deterministic, but the movement command scaled to full speed in the policy's direction;
-  * sampled_meta (HRL-SAC only): deterministic low level, goals sampled from the meta-controller's softmax.
+  * sampled_meta (HRL-SAC only): deterministic low level, goals sampled from the meta-controller's softmax;
+  * scripted_low_level (HRL-SAC only): the learned meta-controller's goals, flown by a scripted low level (straight
+    at the goal's point at full speed, slowing over the last step, sensor on, zoom 0; no hazard avoidance);
+  * track_object_goals (HRL-SAC only): the learned low level, but TrackObject at every decision (the scripted
+    hierarchy's goal sequence).
+The last two tell the levels apart: which of the two learned halves loses the success.
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
 mean zoom, goal shares). A large gain from sampling, from forcing the sensor on or from full speed says the learned deterministic action, not the
@@ -21,7 +26,7 @@ import sys
 import numpy as np
 import torch
 
-from missions.goals import GOAL_NAMES
+from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
@@ -42,22 +47,34 @@ def main() -> int:
     torch.set_num_threads(1)
     policy = CheckpointPolicy.load(args.run)
     normalise = policy.normalizer.normalize
+    # padded as in hrlsac evaluate, so that the deterministic variant is exactly the evaluation's policy
+    mean_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=True))
+    sampled_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=False))
 
-    def deterministic(obs: np.ndarray) -> np.ndarray:
-        return policy.low.act(normalise(obs), deterministic=True)
+    def deterministic(core) -> np.ndarray:
+        return mean_action(core.obs)
 
-    def sampled(obs: np.ndarray) -> np.ndarray:
-        return policy.low.act(normalise(obs), deterministic=False)
+    def sampled(core) -> np.ndarray:
+        return sampled_action(core.obs)
 
-    def sensor_on(obs: np.ndarray) -> np.ndarray:
-        actions = deterministic(obs).copy()
+    def sensor_on(core) -> np.ndarray:
+        actions = deterministic(core).copy()
         actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
-    def full_speed(obs: np.ndarray) -> np.ndarray:
-        actions = deterministic(obs).copy()
+    def full_speed(core) -> np.ndarray:
+        actions = deterministic(core).copy()
         movement = actions[:, MOVEMENT]
         actions[:, MOVEMENT] = movement / np.maximum(np.linalg.norm(movement, axis=1, keepdims=True), 1e-6)
+        return actions
+
+    def scripted_low_level(core) -> np.ndarray:
+        offset = core.goal_point - core.position
+        distance = np.hypot(*offset.T)
+        step_m = core.flight.max_speed_mps * core.flight.step_period_s
+        actions = np.zeros((core.n, 4))
+        actions[:, MOVEMENT] = offset / np.maximum(distance, 1e-9)[:, None] * np.minimum(1.0, distance / step_m)[:, None]
+        actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
     def goals(sample: bool):
@@ -69,14 +86,15 @@ def main() -> int:
                 "intensity_forced_on": (sensor_on, goals(False)), "full_speed": (full_speed, goals(False))}
     if policy.hierarchical:
         variants["sampled_meta"] = (deterministic, goals(True))
+        variants["scripted_low_level"] = (scripted_low_level, goals(False))
+        variants["track_object_goals"] = (deterministic, lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT))
     results, seen_actions, seen_goals, lengths = {}, [], [], None
     for name, (act, choose_goals) in variants.items():
         core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
         record = name == "deterministic"  # what the evaluation's policy does: actions and goals, recorded
-        policy_act = padded(act)  # padded as in hrlsac evaluate, so this variant is exactly the evaluation's policy
 
-        def act_on(batch, policy_act=policy_act, record=record):
-            actions = policy_act(batch.obs)
+        def act_on(batch, act=act, record=record):
+            actions = act(batch)
             if record:
                 seen_actions.append((batch.steps.copy(), actions))
             return actions

@@ -108,7 +108,8 @@ class CheckpointPolicy:
     @classmethod
     def untrained(cls, config: TrainConfig) -> "CheckpointPolicy":
         """The networks a run with ``config`` starts from and an identity normaliser (benchmarks, tests)."""
-        low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed)
+        low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed,
+                  input_mask=config.low_level_input_mask)
         meta = None
         if config.algo == "hrl-sac":
             meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), config, seed=config.seed + 1)

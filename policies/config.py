@@ -12,6 +12,9 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from autonomy.observation import FIELDS_BY_NAME, OBS_DIM
 from missions.mission import FlightSettings
 
 
@@ -94,6 +97,10 @@ class TrainConfig:
     """Low-level entropy target; None = -|A| = -4."""
     initial_alpha: float = 0.2
     """Initial entropy temperature of both levels."""
+    low_level_ignores: tuple[str, ...] = ("coverage",)
+    """Observation fields (``autonomy.observation.OBSERVATION_FIELDS`` names) that HRL-SAC's low-level networks
+    ignore: their inputs are multiplied by 0 (``networks.InputMask``), so the input stays 276 wide. Flat SAC
+    ignores this (it must plan the search itself). The paper preset: () (the low level sees everything)."""
 
     update_dtype: str = "bfloat16"
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
@@ -170,6 +177,10 @@ class TrainConfig:
         if self.intrinsic_reward not in ("progress", "distance"):
             raise ValueError(f"TrainConfig.intrinsic_reward must be 'progress' or 'distance', "
                              f"got {self.intrinsic_reward!r}")
+        unknown = [name for name in self.low_level_ignores if name not in FIELDS_BY_NAME]
+        if unknown or isinstance(self.low_level_ignores, str):
+            raise ValueError(f"TrainConfig.low_level_ignores must be a list of observation field names "
+                             f"({', '.join(FIELDS_BY_NAME)}), got {self.low_level_ignores!r}")
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
                                 ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1),
@@ -187,6 +198,16 @@ class TrainConfig:
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
 
     @property
+    def low_level_input_mask(self) -> np.ndarray | None:
+        """(276,) 0 / 1: the observation features the continuous SAC's networks see; None = all of them."""
+        if self.algo != "hrl-sac" or not self.low_level_ignores:
+            return None
+        keep = np.ones(OBS_DIM, dtype=np.float32)
+        for name in self.low_level_ignores:
+            keep[FIELDS_BY_NAME[name].slice] = 0.0
+        return keep
+
+    @property
     def sac_gamma(self) -> float:
         """The discount of the continuous SAC this config trains: the low level's (HRL-SAC) or flat SAC's."""
         return self.low_level_gamma if self.algo == "hrl-sac" else self.gamma
@@ -199,7 +220,7 @@ class TrainConfig:
         elif name == "paper":
             big = NetworkConfig(hidden=(512, 512, 512), head=256, layer_norm=True, dropout=0.1)
             meta = NetworkConfig(hidden=(256, 256), layer_norm=True, dropout=0.1)
-            base = cls(preset="paper", low_level_gamma=0.99, update_dtype="float32", actor=big,
+            base = cls(preset="paper", low_level_gamma=0.99, update_dtype="float32", low_level_ignores=(), actor=big,
                        critic=NetworkConfig(hidden=(512, 512), head=256, dropout=0.1),
                        meta_actor=meta, meta_critic=meta, flight=FlightSettings(max_steps=10_000))
         else:
@@ -217,4 +238,5 @@ class TrainConfig:
             data[name] = NetworkConfig(**{**data[name], "hidden": tuple(data[name]["hidden"])})
         data["log_std_bounds"] = tuple(data["log_std_bounds"])
         data["missions"] = tuple(data.get("missions", ()))
+        data["low_level_ignores"] = tuple(data.get("low_level_ignores", ()))  # runs from before it saw everything
         return cls(**data)

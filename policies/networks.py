@@ -30,9 +30,29 @@ LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
 # ---------------------------------------------------------------------------------------------------- MLPs
-def hidden_layers(in_dim: int, net: NetworkConfig) -> list[nn.Module]:
-    """The hidden part of an MLP: per width in ``net.layers``: Linear -> [LayerNorm] -> ReLU -> [Dropout]."""
-    layers: list[nn.Module] = []
+class InputMask(nn.Module):
+    """Multiplies the inputs by a constant 0 / 1 vector: the network ignores the features marked 0.
+
+    Zeroed inputs give their first-layer weights no gradient, so the network behaves as if those features were
+    absent while keeping the input width (and the artifact's observation layout). A buffer, so that checkpoints
+    and exported artifacts carry it.
+    """
+
+    def __init__(self, keep: np.ndarray):
+        super().__init__()
+        keep = np.asarray(keep, dtype=np.float32).reshape(-1)
+        if not np.all((keep == 0.0) | (keep == 1.0)):
+            raise ValueError("InputMask.keep must hold only 0 and 1")
+        self.register_buffer("keep", torch.from_numpy(keep.copy()))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x * self.keep.to(x.dtype)
+
+
+def hidden_layers(in_dim: int, net: NetworkConfig, input_mask: np.ndarray | None = None) -> list[nn.Module]:
+    """The hidden part of an MLP: [InputMask] then, per width in ``net.layers``: Linear -> [LayerNorm] -> ReLU ->
+    [Dropout]."""
+    layers: list[nn.Module] = [] if input_mask is None else [InputMask(input_mask)]
     width = int(in_dim)
     for hidden in net.layers:
         layers.append(nn.Linear(width, hidden))
@@ -45,9 +65,9 @@ def hidden_layers(in_dim: int, net: NetworkConfig) -> list[nn.Module]:
     return layers
 
 
-def mlp(in_dim: int, net: NetworkConfig, out_dim: int) -> nn.Sequential:
-    """``hidden_layers(in_dim, net)`` followed by a final ``Linear(net.layers[-1], out_dim)`` (no activation)."""
-    return nn.Sequential(*hidden_layers(in_dim, net), nn.Linear(net.layers[-1], int(out_dim)))
+def mlp(in_dim: int, net: NetworkConfig, out_dim: int, input_mask: np.ndarray | None = None) -> nn.Sequential:
+    """``hidden_layers(in_dim, net, input_mask)`` followed by a final ``Linear(net.layers[-1], out_dim)``."""
+    return nn.Sequential(*hidden_layers(in_dim, net, input_mask), nn.Linear(net.layers[-1], int(out_dim)))
 
 
 def float32_output(net: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
@@ -73,12 +93,12 @@ class SquashedGaussianActor(nn.Module):
     """
 
     def __init__(self, obs_dim: int, act_dim: int, net: NetworkConfig,
-                 log_std_bounds: tuple[float, float] = (-20.0, 2.0)):
+                 log_std_bounds: tuple[float, float] = (-20.0, 2.0), input_mask: np.ndarray | None = None):
         super().__init__()
         if not log_std_bounds[0] < log_std_bounds[1]:
             raise ValueError(f"log_std_bounds must be (low, high) with low < high, got {log_std_bounds}")
         self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
-        self.trunk = nn.Sequential(*hidden_layers(obs_dim, net))
+        self.trunk = nn.Sequential(*hidden_layers(obs_dim, net, input_mask))
         self.mean = nn.Linear(net.layers[-1], act_dim)
         self.log_std = nn.Linear(net.layers[-1], act_dim)
         self.log_std_min, self.log_std_max = float(log_std_bounds[0]), float(log_std_bounds[1])
@@ -128,11 +148,13 @@ class CategoricalActor(nn.Module):
 class TwinQ(nn.Module):
     """Two independent Q-networks on concat(obs, action) (clipped double Q, Fujimoto et al. 2018)."""
 
-    def __init__(self, obs_dim: int, act_dim: int, net: NetworkConfig):
+    def __init__(self, obs_dim: int, act_dim: int, net: NetworkConfig, input_mask: np.ndarray | None = None):
         super().__init__()
         self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
-        self.q1 = mlp(obs_dim + act_dim, net, 1)
-        self.q2 = mlp(obs_dim + act_dim, net, 1)
+        # input_mask covers the observation; the action is always seen
+        mask = None if input_mask is None else np.concatenate([np.asarray(input_mask).reshape(-1), np.ones(act_dim)])
+        self.q1 = mlp(obs_dim + act_dim, net, 1, mask)
+        self.q2 = mlp(obs_dim + act_dim, net, 1, mask)
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, obs_dim), (B, act_dim) with act in the unit range [-1, 1] -> q1 (B,), q2 (B,)."""

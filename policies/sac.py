@@ -59,7 +59,7 @@ class SAC(CheckpointedAgent):
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: np.ndarray, action_high: np.ndarray,
-                 config: TrainConfig, seed: int = 0):
+                 config: TrainConfig, seed: int = 0, input_mask: np.ndarray | None = None):
         self.config = config
         self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
         self.scaler = ActionScaler(action_low, action_high)
@@ -71,8 +71,8 @@ class SAC(CheckpointedAgent):
         init_seed, noise_seed, dropout_seed = derive_seeds(seed, 3)
         with torch.random.fork_rng(devices=[]):  # initialise from our seed, leave the global RNG as it was
             torch.manual_seed(init_seed)
-            self.actor = SquashedGaussianActor(obs_dim, act_dim, config.actor, config.log_std_bounds)
-            self.critic = TwinQ(obs_dim, act_dim, config.critic)
+            self.actor = SquashedGaussianActor(obs_dim, act_dim, config.actor, config.log_std_bounds, input_mask)
+            self.critic = TwinQ(obs_dim, act_dim, config.critic, input_mask)
         self.critic_target = copy.deepcopy(self.critic).eval().requires_grad_(False)
         # Optimise log(alpha): keeps alpha positive and makes Adam's steps relative.
         self.log_alpha = torch.tensor(math.log(config.initial_alpha), dtype=torch.float32, requires_grad=True)

@@ -74,7 +74,7 @@ class Trainer:
                                                                     flight=cfg.flight, goal_conditioned=self.hrl))
         self.rng = np.random.default_rng(cfg.seed)
         self.normalizer = RunningMeanStd((OBS_DIM,))
-        self.low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed)
+        self.low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed, input_mask=cfg.low_level_input_mask)
         self.low_buffer = PrioritizedReplayBuffer(cfg.buffer_size, {
             "obs": ((OBS_DIM,), np.float32), "action": ((4,), np.float32), "reward": ((), np.float32),
             "next_obs": ((OBS_DIM,), np.float32), "done": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed)

@@ -539,3 +539,46 @@ def test_bfloat16_updates_are_reproducible_and_resume_bit_identically():
 def test_update_dtype_is_validated():
     with pytest.raises(ValueError, match="TrainConfig.update_dtype must be 'float32' or 'bfloat16', got 'float16'"):
         TrainConfig(update_dtype="float16")
+
+
+# ---------------------------------------------------------------------------------------------------- input mask
+def test_low_level_input_mask_ignores_the_coverage_map_and_only_for_hrl_sac():
+    from autonomy.observation import FIELDS_BY_NAME
+
+    coverage = FIELDS_BY_NAME["coverage"].slice
+    mask = TrainConfig().low_level_input_mask
+    assert mask.shape == (276,) and mask[coverage].sum() == 0 and mask.sum() == 276 - 256
+    assert TrainConfig(algo="sac").low_level_input_mask is None  # flat SAC plans the search itself
+    assert TrainConfig.from_preset("paper").low_level_input_mask is None  # the paper's low level sees all
+    assert TrainConfig(low_level_ignores=()).low_level_input_mask is None
+    # runs written before the field existed saw everything, and must load as they were trained
+    legacy = TrainConfig().to_dict()
+    del legacy["low_level_ignores"]
+    assert TrainConfig.from_dict(legacy).low_level_input_mask is None
+
+
+def test_unknown_ignored_field_is_refused_with_the_field_names():
+    with pytest.raises(ValueError, match=r"low_level_ignores must be a list of observation field names "
+                                         r"\(agent_position, target_offset, .*goal\), got \('coverege',\)"):
+        TrainConfig(low_level_ignores=("coverege",))
+
+
+def test_masked_inputs_change_no_output_and_get_no_gradient():
+    keep = np.array([1, 0, 1, 0, 1, 1], dtype=np.float32)
+    agent = SAC(6, 4, ENV_LOW, ENV_HIGH, small_config(), seed=1, input_mask=keep)
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((16, 6)).astype(np.float32)
+    other = obs.copy()
+    other[:, keep == 0] = rng.standard_normal((16, 2)) * 100  # only the masked features differ
+    np.testing.assert_array_equal(agent.act(obs, deterministic=True), agent.act(other, deterministic=True))
+    action = torch.rand(16, 4) * 2 - 1
+    for a, b in zip(agent.critic(torch.from_numpy(obs), action), agent.critic(torch.from_numpy(other), action)):
+        torch.testing.assert_close(a, b)
+    # an update moves the first layers' weights of the kept inputs only
+    before = [agent.actor.trunk[1].weight.detach().clone(), agent.critic.q1[1].weight.detach().clone()]
+    batch = continuous_batch(rng, 32, obs_dim=6, low=ENV_LOW, high=ENV_HIGH)
+    agent.update(batch)
+    for layer, old in zip((agent.actor.trunk[1], agent.critic.q1[1]), before):
+        moved = (layer.weight.detach() != old).any(dim=0)
+        assert not moved[:6][keep == 0].any() and moved[:6][keep == 1].all()
+        assert moved[6:].all()  # the critic's action inputs are always seen
