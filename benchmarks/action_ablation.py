@@ -9,7 +9,9 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
   * scripted_low_level (HRL-SAC only): the learned meta-controller's goals, flown by a scripted low level (straight
     at the goal's point at full speed, slowing over the last step, sensor on, zoom 0; no hazard avoidance);
   * track_object_goals (HRL-SAC only): the learned low level, but TrackObject at every decision (the scripted
-    hierarchy's goal sequence).
+    hierarchy's goal sequence);
+  * coverage_unseen (runs whose low level sees the coverage map): deterministic, with the coverage inputs held
+    at their training mean (normalised 0), as if the low level could not see the map.
 The last two tell the levels apart: which of the two learned halves loses the success.
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
@@ -26,6 +28,7 @@ import sys
 import numpy as np
 import torch
 
+from autonomy.observation import FIELDS_BY_NAME
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
 from policies.checkpoint_policy import CheckpointPolicy
@@ -35,6 +38,7 @@ from policies.parallel_evaluation import padded
 from common import write_report
 
 MOVEMENT, SEARCH_INTENSITY, CAMERA_ZOOM = slice(0, 2), 2, 3  # action components (docs/environment.md)
+COVERAGE = FIELDS_BY_NAME["coverage"].slice
 
 
 def main() -> int:
@@ -49,6 +53,11 @@ def main() -> int:
     normalise = policy.normalizer.normalize
     # padded as in hrlsac evaluate, so that the deterministic variant is exactly the evaluation's policy
     mean_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=True))
+
+    def coverage_unseen_action(obs: np.ndarray) -> np.ndarray:
+        unit = normalise(obs)
+        unit[:, COVERAGE] = 0.0
+        return policy.low.act(unit, deterministic=True)
     sampled_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=False))
 
     def deterministic(core) -> np.ndarray:
@@ -77,6 +86,9 @@ def main() -> int:
         actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
+    def coverage_unseen(core) -> np.ndarray:
+        return padded(coverage_unseen_action)(core.obs)
+
     def goals(sample: bool):
         if not policy.hierarchical:
             return None
@@ -88,6 +100,9 @@ def main() -> int:
         variants["sampled_meta"] = (deterministic, goals(True))
         variants["scripted_low_level"] = (scripted_low_level, goals(False))
         variants["track_object_goals"] = (deterministic, lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT))
+    mask = policy.config.low_level_input_mask
+    if mask is None or mask[COVERAGE].all():
+        variants["coverage_unseen"] = (coverage_unseen, goals(False))
     results, seen_actions, seen_goals, lengths = {}, [], [], None
     for name, (act, choose_goals) in variants.items():
         core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
