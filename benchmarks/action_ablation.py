@@ -12,11 +12,11 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
     hierarchy's goal sequence);
   * coverage_unseen (runs whose low level sees the coverage map): deterministic, with the coverage inputs held
     at their training mean (normalised 0), as if the low level could not see the map.
-The last two tell the levels apart: which of the two learned halves loses the success.
+scripted_low_level and track_object_goals tell the levels apart: which learned half loses the success.
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
-mean zoom, goal shares). A large gain from sampling, from forcing the sensor on or from full speed says the learned deterministic action, not the
-policy's knowledge of where to fly, is what fails (docs/results/README.md).
+mean zoom, goal shares). A large gain from sampling, from forcing the sensor on or from full speed says the
+learned deterministic action, not the policy's knowledge of where to fly, is what fails (docs/results/README.md).
 
 Usage: python benchmarks/action_ablation.py RUN [--episodes 300] [--split test] [--out FILE]
 """
@@ -54,11 +54,14 @@ def main() -> int:
     # padded as in hrlsac evaluate, so that the deterministic variant is exactly the evaluation's policy
     mean_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=True))
 
-    def coverage_unseen_action(obs: np.ndarray) -> np.ndarray:
-        unit = normalise(obs)
-        unit[:, COVERAGE] = 0.0
-        return policy.low.act(unit, deterministic=True)
     sampled_action = padded(lambda obs: policy.low.act(normalise(obs), deterministic=False))
+
+    def mean_action_without_coverage(obs: np.ndarray) -> np.ndarray:
+        unit = normalise(obs)
+        unit[:, COVERAGE] = 0.0  # the training mean of every coverage input
+        return policy.low.act(unit, deterministic=True)
+
+    coverage_unseen_action = padded(mean_action_without_coverage)
 
     def deterministic(core) -> np.ndarray:
         return mean_action(core.obs)
@@ -82,12 +85,13 @@ def main() -> int:
         distance = np.hypot(*offset.T)
         step_m = core.flight.max_speed_mps * core.flight.step_period_s
         actions = np.zeros((core.n, 4))
-        actions[:, MOVEMENT] = offset / np.maximum(distance, 1e-9)[:, None] * np.minimum(1.0, distance / step_m)[:, None]
+        speed_fraction = np.minimum(1.0, distance / step_m)  # slow over the last step, as ScriptedSearch
+        actions[:, MOVEMENT] = offset * (speed_fraction / np.maximum(distance, 1e-9))[:, None]
         actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
     def coverage_unseen(core) -> np.ndarray:
-        return padded(coverage_unseen_action)(core.obs)
+        return coverage_unseen_action(core.obs)
 
     def goals(sample: bool):
         if not policy.hierarchical:

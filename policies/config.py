@@ -102,8 +102,8 @@ class TrainConfig:
     critics ignore: their inputs are multiplied by 0 (``networks.InputMask``), so the input stays 276 wide. Where
     to search is the meta-controller's choice; seeing the coverage map, the low level slowed to a crawl short of
     its point once the area around it was covered (seed 0, 100,000 steps, 500 test episodes: 29.0 % success;
-    masked: 59.4 %; only the actor masked: 35.6 %; docs/results/README.md). Flat SAC ignores this field (it plans
-    the search itself). The paper preset: () (the low level sees everything)."""
+    masked: 59.4 %; a code variant masking only the actor: 35.6 %; docs/results/README.md). Flat SAC ignores
+    this field (it plans the search itself). The paper preset: () (the low level sees everything)."""
 
     update_dtype: str = "bfloat16"
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
