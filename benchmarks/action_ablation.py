@@ -35,7 +35,7 @@ from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
 from policies.parallel_evaluation import padded
 
-from common import write_report
+from common import results_file, write_report
 
 MOVEMENT, SEARCH_INTENSITY, CAMERA_ZOOM = slice(0, 2), 2, 3  # action components (docs/environment.md)
 COVERAGE = FIELDS_BY_NAME["coverage"].slice
@@ -46,7 +46,7 @@ def main() -> int:
     parser.add_argument("run", help="run folder written by hrlsac train")
     parser.add_argument("--episodes", type=int, default=300)
     parser.add_argument("--split", default="test", choices=["train", "val", "test"])
-    parser.add_argument("--out", default="benchmarks/results/action_ablation.json")
+    parser.add_argument("--out", default=results_file("action_ablation.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     policy = CheckpointPolicy.load(args.run)

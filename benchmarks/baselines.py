@@ -15,14 +15,14 @@ import time
 from policies.baseline_eval import run_baseline
 from policies.baselines import BASELINES
 
-from common import write_report
+from common import results_file, write_report
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--split", default="test", choices=["train", "val", "test"])
-    parser.add_argument("--out", default="benchmarks/results/baselines.json")
+    parser.add_argument("--out", default=results_file("baselines.json"))
     args = parser.parse_args()
     results = []
     for name in BASELINES:

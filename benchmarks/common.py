@@ -7,6 +7,13 @@ import statistics
 import sys
 import time
 
+RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+
+
+def results_file(name: str) -> str:
+    """The default --out of a benchmark: benchmarks/results/NAME, wherever the script is run from."""
+    return os.path.join(RESULTS_DIR, name)
+
 
 def summarise(runs: dict[str, list[float]], title: str) -> dict[str, float]:
     """Print each figure's median (with min and max) over the runs; return the medians."""

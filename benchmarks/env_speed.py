@@ -23,7 +23,7 @@ from policies.env import SarSearchEnv
 from policies.env_core import SarSearchConfig
 from policies.vector_env import SarSearchVectorEnv
 
-from common import summarise, write_report
+from common import summarise, results_file, write_report
 
 
 def single_steps_per_s(env, steps: int) -> float:
@@ -57,7 +57,7 @@ def main() -> int:
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--num-envs", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--out", default="benchmarks/results/env_speed.json")
+    parser.add_argument("--out", default=results_file("env_speed.json"))
     args = parser.parse_args()
     runs: dict[str, list[float]] = {"single_raw_steps_per_s": [], "single_make_steps_per_s": [],
                                     "vector_steps_per_s": [], "reference_pendulum_steps_per_s": []}

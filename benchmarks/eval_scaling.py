@@ -31,7 +31,7 @@ from policies.config import TrainConfig
 from policies.evaluation import evaluate_checkpoint
 from policies.train import Trainer
 
-from common import summarise, write_report
+from common import summarise, results_file, write_report
 
 MACHINE_NOTE = "2 cores, shared with other jobs (parallel efficiency is bounded by what the other jobs leave free)"
 
@@ -72,7 +72,7 @@ def main() -> int:
     parser.add_argument("--train-steps", type=int, default=3_000, help="steps of the default run")
     parser.add_argument("--episodes", type=int, default=1_000)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default="benchmarks/results/eval_scaling.json")
+    parser.add_argument("--out", default=results_file("eval_scaling.json"))
     args = parser.parse_args()
     import ray
 

@@ -428,13 +428,14 @@ def print_table(report: dict) -> None:
 
 
 def main() -> int:
+    from common import results_file, write_report
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=1_000_000, help="fuzzed frames (each fed to every target)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--attack-trials", type=int, default=1000, help="tries of each signing attack")
-    parser.add_argument("--out", default="benchmarks/results/fuzz.json")
+    parser.add_argument("--out", default=results_file("fuzz.json"))
     args = parser.parse_args()
-    from common import write_report
 
     report = run(args.frames, args.seed)
     report["signing_attacks"] = signing_attacks(args.attack_trials, args.seed)

@@ -23,7 +23,7 @@ from autonomy.replay import replay_mission
 from missions.mission_file import load_mission
 from sitl_bridge.faults import parse_link_faults
 
-from common import write_report
+from common import results_file, write_report
 
 LOSS_CONDITIONS = ("loss=0", "loss=0.1", "loss=0.3", "loss=0.3,burst=5")
 OUTAGE_LENGTHS_S = (0.5, 2.0, 10.0)
@@ -43,7 +43,7 @@ def main() -> int:
     parser.add_argument("--mission", default="missions/library/demo.yaml")
     parser.add_argument("--max-steps", type=int, default=60, help="decisions per search (shortens the mission)")
     parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--out", default="benchmarks/results/link_faults.json")
+    parser.add_argument("--out", default=results_file("link_faults.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     mission = load_mission(args.mission)

@@ -38,7 +38,7 @@ from policies.export import artifact_bytes, build_manifest
 from policies.export_module import policy_module
 from policies.export_parity import record_observations
 
-from common import write_report
+from common import results_file, write_report
 
 FORMATS = ("torchscript", "torch-export")
 RUNNERS = ("eager",) + FORMATS
@@ -116,7 +116,7 @@ def main() -> int:
     parser.add_argument("--blocks", type=int, default=6, help="turns the runners take (interleaved)")
     parser.add_argument("--presets", default="default,paper", help="comma-separated: default, paper")
     parser.add_argument("--checkpoint", default=None, help="time this run's policy instead of untrained presets")
-    parser.add_argument("--out", default="benchmarks/results/policy_latency.json")
+    parser.add_argument("--out", default=results_file("policy_latency.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     if args.checkpoint:

@@ -22,7 +22,7 @@ from missions.mission_file import load_mission
 from sitl_bridge.link import memory_link_pair
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
-from common import summarise, write_report
+from common import summarise, results_file, write_report
 
 
 def vehicle_only(mission, seconds: float) -> float:
@@ -39,7 +39,7 @@ def main() -> int:
     parser.add_argument("--policy", default="policies/pretrained/hrl-sac.pt")
     parser.add_argument("--mission", default="missions/library/demo.yaml")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default="benchmarks/results/replay_speed.json")
+    parser.add_argument("--out", default=results_file("replay_speed.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     mission, policy = load_mission(args.mission), load_policy(args.policy)

@@ -31,7 +31,7 @@ from missions.mission import FlightSettings, Mission
 from policies.evaluation import episode_batch, run_episodes
 from policies.evaluation_stats import wilson_interval
 
-from common import write_report
+from common import results_file, write_report
 
 
 def main() -> int:
@@ -40,7 +40,7 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--split", default="test", choices=["train", "val", "test"])
     parser.add_argument("--workers", type=int, default=1, help="local processes flying the replays")
-    parser.add_argument("--out", default="benchmarks/results/sim_to_sitl.json")
+    parser.add_argument("--out", default=results_file("sim_to_sitl.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     policy = load_policy(args.policy)

@@ -26,7 +26,7 @@ from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
-from common import summarise, write_report
+from common import summarise, results_file, write_report
 
 
 def flying_pilot() -> LockstepPilot:
@@ -88,7 +88,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per lockstep run")
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--out", default="benchmarks/results/sitl_speed.json")
+    parser.add_argument("--out", default=results_file("sitl_speed.json"))
     args = parser.parse_args()
     runs: dict[str, list[float]] = {"lockstep_realtime_factor": [], "vehicle_ticks_per_s": [],
                                     "dynamics_steps_per_s": [], "reference_heartbeat_roundtrips_per_s": []}

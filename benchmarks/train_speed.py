@@ -45,7 +45,7 @@ from policies.env import SarSearchEnv
 from policies.env_core import SarSearchConfig
 from policies.train import Trainer
 
-from common import summarise, write_report
+from common import summarise, results_file, write_report
 
 PRESETS = {"default": (256, 256), "3x512": (512, 512, 512)}
 TARGETS = {"default": 1.5, "3x512": 1.1}
@@ -115,7 +115,7 @@ def main() -> int:
     parser.add_argument("--warmup", type=int, default=1_000, help="untimed random steps before each timed run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--presets", default="default,3x512", help=f"comma-separated, from {', '.join(PRESETS)}")
-    parser.add_argument("--out", default="benchmarks/results/train_speed.json")
+    parser.add_argument("--out", default=results_file("train_speed.json"))
     args = parser.parse_args()
     presets = [name.strip() for name in args.presets.split(",") if name.strip()]
     if unknown := [name for name in presets if name not in PRESETS]:
