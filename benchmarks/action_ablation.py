@@ -31,6 +31,7 @@ import torch
 from autonomy.observation import FIELDS_BY_NAME
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
+from policies.baselines import fly_straight
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
 from policies.parallel_evaluation import padded
@@ -81,14 +82,7 @@ def main() -> int:
         return actions
 
     def scripted_low_level(core) -> np.ndarray:
-        offset = core.goal_point - core.position
-        distance = np.hypot(*offset.T)
-        step_m = core.flight.max_speed_mps * core.flight.step_period_s
-        actions = np.zeros((core.n, 4))
-        speed_fraction = np.minimum(1.0, distance / step_m)  # slow over the last step, as ScriptedSearch
-        actions[:, MOVEMENT] = offset * (speed_fraction / np.maximum(distance, 1e-9))[:, None]
-        actions[:, SEARCH_INTENSITY] = 1.0
-        return actions
+        return fly_straight(core.position, core.goal_point, core.flight)  # the scripted baselines' steering
 
     def coverage_unseen(core) -> np.ndarray:
         return coverage_unseen_action(core.obs)

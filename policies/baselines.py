@@ -34,6 +34,24 @@ FENCE_MARGIN_M = 20.0
 HAZARD_MARGIN_M = 15.0
 
 
+def fly_straight(position: np.ndarray, goal: np.ndarray, flight, turn: Callable | None = None) -> np.ndarray:
+    """(N, 4) actions flying from ``position`` straight at ``goal`` (both (N, 2) metres) at full speed, slowing over
+    the last step so as to stop on the point instead of overshooting it, with the sensor on and the camera at
+    ``ZOOM``. ``turn(position, direction, step_m)`` may bend the unit direction (hazard avoidance)."""
+    offset = goal - position
+    distance = np.hypot(*offset.T)
+    step_m = flight.max_speed_mps * flight.step_period_s
+    speed_fraction = np.minimum(1.0, distance / step_m)
+    direction = offset / np.maximum(distance, 1e-9)[:, None]
+    if turn is not None:
+        direction = turn(position, direction, step_m)
+    actions = np.zeros((len(position), 4))
+    actions[:, 0:2] = direction * speed_fraction[:, None]
+    actions[:, 2] = 1.0
+    actions[:, 3] = ZOOM
+    return actions
+
+
 class ScriptedSearch:
     """Base: a per-environment waypoint list, followed at full speed; the victim's detection overrides it."""
 
@@ -68,17 +86,7 @@ class ScriptedSearch:
         fence = core.scen.fence
         goal[:, 0] = np.clip(goal[:, 0], fence[:, 0] + FENCE_MARGIN_M, fence[:, 1] - FENCE_MARGIN_M)
         goal[:, 1] = np.clip(goal[:, 1], fence[:, 2] + FENCE_MARGIN_M, fence[:, 3] - FENCE_MARGIN_M)
-        offset = goal - position
-        distance = np.hypot(*offset.T)
-        # full speed, slowing over the last step so that we stop on the point instead of overshooting it
-        step_m = core.flight.max_speed_mps * core.flight.step_period_s
-        speed_fraction = np.minimum(1.0, distance / step_m)
-        direction = self._avoid_hazards(position, offset / np.maximum(distance, 1e-9)[:, None], step_m)
-        actions = np.zeros((core.n, 4))
-        actions[:, 0:2] = direction * speed_fraction[:, None]
-        actions[:, 2] = 1.0
-        actions[:, 3] = ZOOM
-        return actions
+        return fly_straight(position, goal, core.flight, turn=self._avoid_hazards)
 
 
     def _avoid_hazards(self, position: np.ndarray, direction: np.ndarray, step_m: float) -> np.ndarray:

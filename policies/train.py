@@ -153,10 +153,10 @@ class Trainer:
             # The bonus pays for completing g (info["goal_completed"]), not for being within reach of it: over an
             # unsearched cell with the sensor off the goal stays put, and a bonus for arriving paid every step of
             # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
-            completed = info["goal_completed"]
+            goal_completed = info["goal_completed"]
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
             newly_covered = info["coverage_ratio"] * core.coverage[0].size - covered_before
-            low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * completed
+            low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
                           + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
         else:
