@@ -10,6 +10,7 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
     at the goal's point at full speed, slowing over the last step, sensor on, zoom 0; no hazard avoidance);
   * track_object_goals (HRL-SAC only): the learned low level, but TrackObject at every decision (the scripted
     hierarchy's goal sequence);
+  * scripted_hierarchy (HRL-SAC only): neither learned half, both scripted as above: what the goal set allows;
   * coverage_unseen (runs whose low level sees the coverage map): deterministic, with the coverage inputs held
     at their training mean (normalised 0), as if the low level could not see the map.
 scripted_low_level and track_object_goals tell the levels apart: which learned half loses the success.
@@ -97,7 +98,9 @@ def main() -> int:
     if policy.hierarchical:
         variants["sampled_meta"] = (deterministic, goals(True))
         variants["scripted_low_level"] = (scripted_low_level, goals(False))
-        variants["track_object_goals"] = (deterministic, lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT))
+        track_object = lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT)  # noqa: E731
+        variants["track_object_goals"] = (deterministic, track_object)
+        variants["scripted_hierarchy"] = (scripted_low_level, track_object)  # no learned part: the goals' ceiling
     mask = policy.config.low_level_input_mask
     if mask is None or mask[COVERAGE].all():
         variants["coverage_unseen"] = (coverage_unseen, goals(False))
