@@ -8,11 +8,19 @@ N searches; positions are (north, east) metres in the local NED frame of home.
 * ExploreArea: the centre of the most attractive unexplored 8 x 8 block of the coverage grid (blocks are 4 x 4
   cells); attractiveness = uncovered share - 0.5 * distance / area diagonal, among blocks at least half
   uncovered. Falls back to the datum when the whole area is covered.
-* SearchSpecificLocation: the uncovered grid cell with the highest prior probability of holding the victim:
-  a Gaussian around the datum with the datum's uncertainty, times (1 - coverage). Falls back to the datum.
+* SearchSpecificLocation: the uncovered grid cell with the highest prior probability of holding the victim per
+  travel: a Gaussian around the datum with the datum's uncertainty, times (1 - coverage), times
+  exp(-distance from the drone / 200 m), so that of two almost equally likely cells the nearer is searched first
+  instead of crossing the datum back and forth. Falls back to the datum.
 * TrackObject: the best estimate of where the victim is now: its last detection, or before any detection the
   SearchSpecificLocation point (the most probable place not yet searched).
 * ReturnToBase: home (the start point).
+
+Every goal's point is then routed around the charted danger zones (``route_around_hazards``): when the straight
+leg from the drone to the point would pass within ``HAZARD_MARGIN_M`` of a zone, the drone is sent first to a
+waypoint beyond the tangent point of that inflated zone, and the goal is grounded again from there on arrival.
+The danger zones are charted (they are part of the mission file), the observation does not show them, so the
+search logic, not the learned low level, keeps the drone clear of them, as the scripted baselines do.
 
 Callers pass the datum drifted to the current time (``ScenarioBatch.datum_at``), and re-ground a goal when the
 drone reaches its point before the meta-controller's next decision (``SarSearchBatch.step``): the goal keeps its
@@ -28,6 +36,14 @@ NO_GOAL = -1
 EXPLORE, SEARCH_LOCATION, TRACK_OBJECT, RETURN_TO_BASE = range(4)
 BLOCKS = 8  # ExploreArea works on an 8 x 8 grid of blocks
 DISTANCE_WEIGHT = 0.5
+TRAVEL_SCALE_M = 200.0
+"""SearchSpecificLocation discounts a cell's probability by exp(-distance / TRAVEL_SCALE_M) (a probe of 30-400 m
+with a scripted low level: 200 m gave the highest success, docs/environment.md)."""
+HAZARD_MARGIN_M = 20.0
+"""Clearance kept from a danger zone's rim by the routed goal points (more than the 15 m reach radius, so a drone
+that turns once within reach of a waypoint still clears the zone)."""
+EXIT_MARGIN_M = 10.0
+"""A drone already inside a zone's margin is first sent this far beyond it, straight away from the centre."""
 
 
 def cell_centres(area: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
@@ -60,23 +76,83 @@ def explore_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray, 
     return point
 
 
-def search_location_point(area: np.ndarray, coverage: np.ndarray, datum: np.ndarray, datum_sigma: np.ndarray) -> np.ndarray:
+def search_location_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray, datum: np.ndarray,
+                          datum_sigma: np.ndarray) -> np.ndarray:
     n, grid = coverage.shape[0], coverage.shape[1]
     north, east = cell_centres(area, grid)
     sigma2 = 2.0 * np.maximum(datum_sigma, 1.0)[:, None, None] ** 2
-    prior = np.exp(-((north[:, :, None] - datum[:, 0, None, None]) ** 2
-                     + (east[:, None, :] - datum[:, 1, None, None]) ** 2) / sigma2)
-    score = prior * (1.0 - coverage)
+    # log of prior x travel discount, so that far cells compare without underflowing to 0
+    log_score = -((north[:, :, None] - datum[:, 0, None, None]) ** 2
+                  + (east[:, None, :] - datum[:, 1, None, None]) ** 2) / sigma2
+    log_score -= np.hypot(north[:, :, None] - agent_ne[:, 0, None, None],
+                          east[:, None, :] - agent_ne[:, 1, None, None]) / TRAVEL_SCALE_M
+    uncovered = 1.0 - coverage
+    score = np.where(uncovered > 0.0, log_score + np.log(np.maximum(uncovered, 1e-30)), -np.inf)
     point = _argmax_point(score, north, east)
-    exhausted = score.reshape(n, -1).max(axis=1) <= 1e-12
+    exhausted = ~np.isfinite(score.reshape(n, -1).max(axis=1))
     point[exhausted] = datum[exhausted]
     return point
 
 
+def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.ndarray, obstacle_valid: np.ndarray,
+                         area: np.ndarray, margin_m: float = HAZARD_MARGIN_M) -> np.ndarray:
+    """(N, 2) points the drone can fly to in a straight line from ``agent_ne`` without passing within ``margin_m``
+    of a danger zone (circles (N, O, 3): north, east, radius) on its way towards ``point``.
+
+    A point inside an inflated zone moves out to its rim. When the straight leg crosses an inflated zone, the
+    first one along the leg is passed on the side that makes the shorter way: the waypoint lies on the tangent
+    from the drone to the inflated circle, one inflated radius beyond the tangent point (past it, the way on
+    is clear of that zone). A drone inside an inflated zone, with the zone ahead, leaves it radially first.
+    Waypoints are kept inside the search area."""
+    out = point.astype(np.float64, copy=True)
+    centre, radius = obstacles[:, :, :2], obstacles[:, :, 2] + margin_m
+    for k in range(obstacles.shape[1]):  # a point inside an inflated zone: onto its rim
+        away = out - centre[:, k]
+        distance = np.hypot(*away.T)
+        inside = obstacle_valid[:, k] & (distance < radius[:, k])
+        unit = away[inside] / np.maximum(distance[inside], 1e-9)[:, None]
+        out[inside] = centre[inside, k] + unit * (radius[inside, k] + 1.0)[:, None]
+    leg = out - agent_ne
+    length = np.maximum(np.hypot(*leg.T), 1e-9)
+    along = leg / length[:, None]
+    to_centre = centre - agent_ne[:, None, :]
+    t = np.einsum("noi,ni->no", to_centre, along)  # how far along the leg each centre lies
+    nearest = np.clip(t, 0.0, length[:, None])[:, :, None] * along[:, None, :]
+    crosses = obstacle_valid & (t > 0.0) & (np.hypot(*(to_centre - nearest).transpose(2, 0, 1)) < radius)
+    rows = np.flatnonzero(crosses.any(axis=1))
+    if len(rows) == 0:
+        return out
+    first = np.where(crosses[rows], t[rows], np.inf).argmin(axis=1)
+    c, r, p = centre[rows, first], radius[rows, first], agent_ne[rows]
+    from_centre = p - c
+    d = np.maximum(np.hypot(*from_centre.T), 1e-9)
+    base = np.arctan2(from_centre[:, 1], from_centre[:, 0])
+    half_angle = np.arccos(np.minimum(r / d, 1.0))
+    best, best_cost = None, None
+    for side in (1.0, -1.0):  # the two tangents; keep the one with the shorter way to the point
+        angle = base + side * half_angle
+        touch = c + r[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        heading = touch - p
+        heading /= np.maximum(np.hypot(*heading.T), 1e-9)[:, None]
+        waypoint = touch + heading * r[:, None]
+        cost = np.hypot(*(waypoint - p).T) + np.hypot(*(out[rows] - waypoint).T)
+        best = waypoint if best is None else np.where((cost < best_cost)[:, None], waypoint, best)
+        best_cost = cost if best_cost is None else np.minimum(cost, best_cost)
+    inside_margin = d <= r
+    best[inside_margin] = c[inside_margin] + (from_centre[inside_margin] / d[inside_margin, None]) \
+        * (r[inside_margin] + EXIT_MARGIN_M)[:, None]
+    best[:, 0] = np.clip(best[:, 0], area[rows, 0], area[rows, 1])
+    best[:, 1] = np.clip(best[:, 1], area[rows, 2], area[rows, 3])
+    out[rows] = best
+    return out
+
+
 def ground_goals(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray,
                  datum: np.ndarray, datum_sigma: np.ndarray, last_detection: np.ndarray, has_detection: np.ndarray,
-                 home: np.ndarray) -> np.ndarray:
-    """(N, 2) goal points for goal indices (N,); coverage is the (N, 32, 32) grid. Entries with no goal get the datum."""
+                 home: np.ndarray, obstacles: np.ndarray | None = None,
+                 obstacle_valid: np.ndarray | None = None) -> np.ndarray:
+    """(N, 2) goal points for goal indices (N,); coverage is the (N, 32, 32) grid. Entries with no goal get the datum.
+    With ``obstacles`` (N, O, 3) and ``obstacle_valid`` (N, O), points are routed around those danger zones."""
     point = datum.copy()
     explore = goal == EXPLORE
     if explore.any():
@@ -84,9 +160,11 @@ def ground_goals(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, cover
     track = (goal == TRACK_OBJECT) & has_detection
     search_here = (goal == SEARCH_LOCATION) | ((goal == TRACK_OBJECT) & ~has_detection)
     if search_here.any():
-        point[search_here] = search_location_point(area[search_here], coverage[search_here], datum[search_here],
-                                                   datum_sigma[search_here])
+        point[search_here] = search_location_point(agent_ne[search_here], area[search_here], coverage[search_here],
+                                                   datum[search_here], datum_sigma[search_here])
     point[track] = last_detection[track]
     home_goal = goal == RETURN_TO_BASE
     point[home_goal] = home[home_goal]
+    if obstacles is not None:
+        point = route_around_hazards(agent_ne, point, obstacles, obstacle_valid, area)
     return point

@@ -11,7 +11,8 @@ the drone reached and the sensor settings it flew with:
    the same scenario, seed and path give the same detections in training and in flight;
 3. the victim's last detection (or, until then, the drifting datum) is updated;
 4. end conditions: the victim reached, a danger zone entered, the geofence left;
-5. a goal whose point was reached is grounded again (``missions.goals``).
+5. a goal whose point was reached is grounded again (``missions.goals``; points are routed around the charted
+   danger zones).
 """
 from __future__ import annotations
 
@@ -115,7 +116,7 @@ class SearchState:
         self.goal_point[mask] = goal_logic.ground_goals(
             self.goal[mask], self.position[mask], scen.area[mask], self.coverage[mask],
             scen.datum_at(self.time_s)[mask], scen.datum_sigma[mask], self.last_detection[mask],
-            self.has_detection[mask], scen.start[mask])
+            self.has_detection[mask], scen.start[mask], scen.obstacles[mask], scen.obstacle_valid[mask])
 
     def target_position(self, goal_conditioned: bool) -> np.ndarray:
         """What the observation calls the target, never the hidden victim: the goal's point (HRL-SAC), or the

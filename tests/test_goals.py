@@ -36,13 +36,26 @@ def test_track_object_is_the_last_detection_or_else_the_most_probable_unsearched
 
 def test_search_location_is_the_most_probable_uncovered_cell_near_the_datum():
     datum = cell_centre(20, 19)
-    np.testing.assert_allclose(ground(SEARCH_LOCATION, datum=datum), datum)
+    np.testing.assert_allclose(ground(SEARCH_LOCATION, agent=datum, datum=datum), datum)
     coverage = np.zeros((32, 32), np.float32)
     coverage[19:22, 18:21] = 1.0  # the datum's cell and its neighbours have been searched
     point = np.array(ground(SEARCH_LOCATION, coverage=coverage, datum=datum))
     distance = np.hypot(*(point - datum))
     assert 60.0 < distance < 70.0  # the nearest ring of unsearched cells (2 cells = 62.5 m away)
     np.testing.assert_allclose(ground(SEARCH_LOCATION, coverage=np.ones((32, 32), np.float32), datum=datum), datum)
+
+
+def test_search_location_prefers_the_nearer_of_two_equally_likely_cells():
+    datum = cell_centre(20, 19)
+    coverage = np.zeros((32, 32), np.float32)
+    coverage[20, 19] = 1.0  # the datum's cell searched: its four neighbours are equally likely
+    south = np.array(ground(SEARCH_LOCATION, agent=(0.0, 109.375), coverage=coverage, datum=datum))
+    north = np.array(ground(SEARCH_LOCATION, agent=(900.0, 109.375), coverage=coverage, datum=datum))
+    np.testing.assert_allclose(south, cell_centre(19, 19))
+    np.testing.assert_allclose(north, cell_centre(21, 19))
+    # far from the datum, a near unlikely cell does not beat the likely ones: the prior still leads
+    far = np.array(ground(SEARCH_LOCATION, agent=(-40.0, -490.0), coverage=coverage, datum=datum))
+    assert np.hypot(*(far - datum)) < 100.0
 
 
 def test_explore_prefers_the_nearest_unexplored_block_and_skips_explored_ones():
