@@ -111,12 +111,28 @@ def test_goal_one_hot_and_goal_point_in_goal_conditioned_mode():
     obs = env.set_goal(3)  # ReturnToBase: home
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 0, 1])
     np.testing.assert_allclose(target_position(obs), [50 / 1000, 0.5])
-    obs = env.set_goal(TRACK_OBJECT)  # nothing detected yet: the centre of the datum's grid cell (1000 m / 32)
+    # nothing detected yet: the most probable unsearched cell discounted by travel, here the cell just south of the
+    # datum's (cell centres every 1000 m / 32; the datum's own cell is row 19, 9 m from the datum, 31 m further)
+    obs = env.set_goal(TRACK_OBJECT)
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 1, 0])
-    np.testing.assert_allclose(target_position(obs), [19.5 / 32, 18.5 / 32])
+    np.testing.assert_allclose(target_position(obs), [18.5 / 32, 18.5 / 32])
     np.testing.assert_array_equal(env.meta_observation, obs[:272])
     with pytest.raises(ValueError, match=r"goal indices must be in \[0, 3\]"):
         env.set_goal(4)
+
+
+def test_goal_points_are_routed_around_a_charted_danger_zone_on_the_way():
+    zone = Obstacle(280.0, 40.0, 30.0)  # on the straight line from home (0, 0) to the datum's cells
+    env = env_for(scenario(obstacles=[zone]), goal_conditioned=True)
+    env.reset(seed=0)
+    env.set_goal(TRACK_OBJECT)
+    unrouted = env_for(scenario(), goal_conditioned=True)
+    unrouted.reset(seed=0)
+    unrouted.set_goal(TRACK_OBJECT)
+    point, straight = env.core.goal_point[0], unrouted.core.goal_point[0]
+    assert np.hypot(*(point - straight)) > 100.0  # a waypoint beside the zone, not the cell behind it
+    along = np.linspace(0.0, 1.0, 200)[:, None] * point  # the straight leg from home to the waypoint
+    assert np.hypot(along[:, 0] - zone.north_m, along[:, 1] - zone.east_m).min() >= zone.radius_m + 19.9
 
 
 def test_target_follows_the_datum_drifted_by_current_and_leeway_until_detection():

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from missions.goals import EXPLORE, RETURN_TO_BASE, SEARCH_LOCATION, TRACK_OBJECT, ground_goals
+from missions.goals import (EXPLORE, HAZARD_MARGIN_M, RETURN_TO_BASE, SEARCH_LOCATION, TRACK_OBJECT, ground_goals,
+                           route_around_hazards)
 
 AREA = np.array([[-50.0, 950.0, -500.0, 500.0]])  # 32 x 32 cells of 31.25 m; 8 x 8 blocks of 125 m
 
@@ -79,3 +80,65 @@ def test_goals_are_grounded_independently_in_a_batch():
     np.testing.assert_allclose(points[1], (640.0, 80.0))
     for i, goal in ((2, SEARCH_LOCATION), (3, EXPLORE)):
         np.testing.assert_allclose(points[i], ground(goal))
+
+
+# ---------------------------------------------------------------- routing around charted danger zones
+ZONE = np.array([[[300.0, 0.0, 40.0]]])  # one zone of 40 m radius on the straight line north from home
+VALID = np.array([[True]])
+
+
+def route(agent, point, zones=ZONE, valid=VALID):
+    return route_around_hazards(np.array([agent], float), np.array([point], float), zones, valid, AREA)[0]
+
+
+def clearance(a, b, zone=ZONE[0, 0]) -> float:
+    """Closest distance from the zone's centre to the segment a-b, minus its radius."""
+    a, b, c = np.asarray(a, float), np.asarray(b, float), zone[:2]
+    t = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    return float(np.hypot(*(a + t * (b - a) - c)) - zone[2])
+
+
+def test_a_clear_leg_keeps_its_point():
+    np.testing.assert_allclose(route((0.0, 0.0), (600.0, 200.0)), (600.0, 200.0))  # passes 75 m east of the zone
+    np.testing.assert_allclose(route((0.0, 0.0), (600.0, 0.0), valid=np.array([[False]])), (600.0, 0.0))  # padding
+    np.testing.assert_allclose(route((0.0, 0.0), (200.0, 0.0)), (200.0, 0.0))  # stops short of the zone
+
+
+def test_a_leg_through_a_zone_goes_by_a_waypoint_clear_of_it_on_the_shorter_side():
+    waypoint = route((0.0, 0.0), (600.0, 30.0))  # the point lies slightly east: pass on the east side
+    assert waypoint[1] > 0.0
+    assert clearance((0.0, 0.0), waypoint) >= HAZARD_MARGIN_M - 1e-6
+    assert 0.0 < waypoint[0] < 600.0
+    assert route((0.0, 0.0), (600.0, -30.0))[1] < 0.0  # and west for a point slightly west
+
+
+def test_a_straight_flier_following_the_routed_points_reaches_the_point_and_never_enters_the_zone():
+    for end in ((600.0, 0.0), (600.0, 10.0), (450.0, -5.0), (800.0, 60.0)):
+        position, goal = np.zeros(2), np.array(end)
+        for _ in range(200):
+            waypoint = route(position, goal)
+            while np.hypot(*(waypoint - position)) > 15.0:  # fly at 10 m/s until within reach, then ground again
+                offset = waypoint - position
+                step = offset / np.hypot(*offset) * min(10.0, np.hypot(*offset))
+                assert clearance(position, position + step) > 5.0, (end, position)
+                position = position + step
+            if np.hypot(*(goal - position)) <= 15.0:
+                break
+        assert np.hypot(*(goal - position)) <= 15.0, end
+
+
+def test_a_point_inside_a_zone_moves_to_its_rim_and_a_drone_inside_the_margin_leaves_it_first():
+    rim = route((0.0, 0.0), (300.0, 10.0))  # inside the zone: onto the inflated rim, on the drone's side
+    assert np.hypot(*(rim - ZONE[0, 0, :2])) >= 40.0 + HAZARD_MARGIN_M
+    leave = route((300.0, -50.0), (300.0, 400.0))  # 10 m from the rim, the zone ahead: straight away first
+    assert leave[1] < -50.0 and abs(leave[0] - 300.0) < 1e-6
+
+
+def test_ground_goals_routes_every_goal_it_grounds():
+    zones = np.repeat(np.array([[[300.0, 0.0, 40.0]]]), 2, axis=0)
+    points = ground_goals(np.array([RETURN_TO_BASE, TRACK_OBJECT]), np.array([[600.0, 0.0], [0.0, 0.0]]),
+                          np.repeat(AREA, 2, 0), np.zeros((2, 32, 32), np.float32), np.tile([600.0, 100.0], (2, 1)),
+                          np.full(2, 80.0), np.array([[600.0, 100.0], [600.0, 0.0]]), np.array([False, True]),
+                          np.zeros((2, 2)), zones, np.ones((2, 1), bool))
+    assert clearance((600.0, 0.0), points[0]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[0][0] < 600.0  # home, by a detour
+    assert clearance((0.0, 0.0), points[1]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[1][0] < 600.0
