@@ -39,6 +39,9 @@ DISTANCE_WEIGHT = 0.5
 TRAVEL_SCALE_M = 200.0
 """SearchSpecificLocation discounts a cell's probability by exp(-distance / TRAVEL_SCALE_M) (a probe of 30-400 m
 with a scripted low level: 200 m gave the highest success, docs/environment.md)."""
+FENCE_MARGIN_M = 20.0
+"""Every goal point is kept this far inside the search area (the geofence of training), so that a drone arriving
+at full speed does not carry on across the fence."""
 HAZARD_MARGIN_M = 20.0
 """Clearance kept from a danger zone's rim by the routed goal points (more than the 15 m reach radius, so a drone
 that turns once within reach of a waypoint still clears the zone)."""
@@ -95,17 +98,17 @@ def search_location_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.n
 
 
 def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.ndarray, obstacle_valid: np.ndarray,
-                         area: np.ndarray, margin_m: float = HAZARD_MARGIN_M) -> np.ndarray:
-    """(N, 2) points the drone can fly to in a straight line from ``agent_ne`` without passing within ``margin_m``
-    of a danger zone (circles (N, O, 3): north, east, radius) on its way towards ``point``.
+                         area: np.ndarray) -> np.ndarray:
+    """(N, 2) points the drone can fly to in a straight line from ``agent_ne`` without passing within
+    ``HAZARD_MARGIN_M`` of a danger zone (circles (N, O, 3): north, east, radius) on its way towards ``point``.
 
     A point inside an inflated zone moves out to its rim. When the straight leg crosses an inflated zone, the
     first one along the leg is passed on the side that makes the shorter way: the waypoint lies on the tangent
     from the drone to the inflated circle, one inflated radius beyond the tangent point (past it, the way on
     is clear of that zone). A drone inside an inflated zone, with the zone ahead, leaves it radially first.
-    Waypoints are kept inside the search area."""
+    Waypoints are kept ``FENCE_MARGIN_M`` inside the search area."""
     out = point.astype(np.float64, copy=True)
-    centre, radius = obstacles[:, :, :2], obstacles[:, :, 2] + margin_m
+    centre, radius = obstacles[:, :, :2], obstacles[:, :, 2] + HAZARD_MARGIN_M
     for k in range(obstacles.shape[1]):  # a point inside an inflated zone: onto its rim
         away = out - centre[:, k]
         distance = np.hypot(*away.T)
@@ -141,8 +144,8 @@ def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.
     inside_margin = d <= r
     best[inside_margin] = c[inside_margin] + (from_centre[inside_margin] / d[inside_margin, None]) \
         * (r[inside_margin] + EXIT_MARGIN_M)[:, None]
-    best[:, 0] = np.clip(best[:, 0], area[rows, 0], area[rows, 1])
-    best[:, 1] = np.clip(best[:, 1], area[rows, 2], area[rows, 3])
+    best[:, 0] = np.clip(best[:, 0], area[rows, 0] + FENCE_MARGIN_M, area[rows, 1] - FENCE_MARGIN_M)
+    best[:, 1] = np.clip(best[:, 1], area[rows, 2] + FENCE_MARGIN_M, area[rows, 3] - FENCE_MARGIN_M)
     out[rows] = best
     return out
 
@@ -165,6 +168,8 @@ def ground_goals(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, cover
     point[track] = last_detection[track]
     home_goal = goal == RETURN_TO_BASE
     point[home_goal] = home[home_goal]
+    point[:, 0] = np.clip(point[:, 0], area[:, 0] + FENCE_MARGIN_M, area[:, 1] - FENCE_MARGIN_M)
+    point[:, 1] = np.clip(point[:, 1], area[:, 2] + FENCE_MARGIN_M, area[:, 3] - FENCE_MARGIN_M)
     if obstacles is not None:
         point = route_around_hazards(agent_ne, point, obstacles, obstacle_valid, area)
     return point

@@ -43,6 +43,7 @@ ENERGY_COMPONENTS = slice(0, 4)  # the action components the energy term -0.01 |
 ACTION_LOW = np.array([-1.0, -1.0, 0.0, 0.0], dtype=np.float32)
 ACTION_HIGH = np.array([1.0, 1.0, 1.0, 1.0], dtype=np.float32)
 ACTION_NAMES = ("movement_north", "movement_east", "search_intensity", "camera_zoom")
+SEARCH_INTENSITY = ACTION_NAMES.index("search_intensity")
 
 def next_episode_seed(seed: np.ndarray) -> np.ndarray:
     """The seed of the episode after one with ``seed`` (what an auto-reset uses)."""

@@ -7,7 +7,8 @@ Per vector step (``num_envs`` environments at once):
 2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
 3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
-   ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) +
+   ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) + a bonus per
+   newly covered cell times the search intensity (``coverage_bonus``, ``coverage_by_intensity``) +
    ``extrinsic_weight`` x the environment reward without its constant per-step cost for HRL-SAC, the environment
    reward for flat SAC; the meta-controller's, once its goal has run K steps or the episode ended, with the K-step
    discounted extrinsic return and discount ``meta_gamma ** k``.
@@ -40,7 +41,7 @@ from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
-from policies.env_core import ACTION_HIGH, ACTION_LOW, REWARD_STEP, SarSearchConfig
+from policies.env_core import ACTION_HIGH, ACTION_LOW, REWARD_STEP, SEARCH_INTENSITY, SarSearchConfig
 from policies.normalizer import RunningMeanStd
 from policies.replay import PrioritizedReplayBuffer, linear_beta
 from policies.sac import SAC
@@ -156,6 +157,8 @@ class Trainer:
             goal_completed = info["goal_completed"]
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
             newly_covered = info["coverage_ratio"] * core.coverage[0].size - covered_before
+            if cfg.coverage_by_intensity:  # detection is proportional to the intensity: pay for searching well
+                newly_covered = newly_covered * actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
                           + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
