@@ -557,6 +557,14 @@ def test_low_level_input_mask_ignores_the_coverage_map_and_only_for_hrl_sac():
     assert TrainConfig.from_dict(legacy).low_level_input_mask is None
 
 
+def test_runs_from_before_the_intensity_weighted_coverage_bonus_load_as_trained():
+    assert TrainConfig().coverage_by_intensity
+    legacy = TrainConfig().to_dict()
+    del legacy["coverage_by_intensity"]
+    assert not TrainConfig.from_dict(legacy).coverage_by_intensity
+    assert TrainConfig.from_dict(TrainConfig().to_dict()) == TrainConfig()
+
+
 def test_unknown_ignored_field_is_refused_with_the_field_names():
     with pytest.raises(ValueError, match=r"low_level_ignores must be a list of observation field names "
                                          r"\(agent_position, target_offset, .*goal\), got \('coverege',\)"):

@@ -99,16 +99,20 @@ def test_meta_updates_run_per_completed_meta_transition(tmp_path, per_transition
     assert trainer.meta.num_updates == per_transition * sum(learning_transitions)
 
 
-@pytest.mark.parametrize("kind, coverage_bonus", [("progress", 0.0), ("distance", 0.0), ("progress", 0.5)])
-def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus):
+@pytest.mark.parametrize("kind, coverage_bonus, by_intensity", [("progress", 0.0, True), ("distance", 0.0, True),
+                                                               ("progress", 0.5, False), ("progress", 0.5, True)])
+def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
-                          extrinsic_weight=0.0, coverage_bonus=coverage_bonus, warmup_steps=1_000)
+                          extrinsic_weight=0.0, coverage_bonus=coverage_bonus, coverage_by_intensity=by_intensity,
+                          warmup_steps=1_000)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
     def spy(actions):
         core = trainer.env.core
         captured["before"] = np.hypot(*(core.position - core.goal_point).T)
+        actions[:, 2] = (0.7, 0.9)  # in place: the sensor on in both environments, at two intensities
+        captured["intensity"] = actions[:, 2].copy()
         result = real_step(actions)
         captured["info"] = result[4]
         return result
@@ -120,6 +124,9 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
     toward = captured["before"] - distance if kind == "progress" else -distance
     assert kind == "distance" or np.all(np.abs(toward) < 20.0)  # one step of flight, not a distance
     newly_covered = info["coverage_ratio"] * 1024  # the grid was empty before the first step
+    assert coverage_bonus == 0.0 or newly_covered.any()
+    if by_intensity:  # a cell covered at intensity 0.7 earns 0.7 of the bonus
+        newly_covered = newly_covered * captured["intensity"]
     moved_on = np.hypot(*(trainer.env.core.goal_point - info["goal_point"]).T) > config.flight.reach_radius_m
     completed = (distance <= config.flight.reach_radius_m) & moved_on
     expected = toward / 100.0 + completed + coverage_bonus * newly_covered
