@@ -8,7 +8,7 @@ Per vector step (``num_envs`` environments at once):
 3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
    ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) + a bonus per
-   newly covered cell times the search intensity (``coverage_bonus``, ``coverage_by_intensity``) +
+   newly covered cell (``coverage_bonus``; times the cell's search intensity with ``coverage_by_intensity``) +
    ``extrinsic_weight`` x the environment reward without its constant per-step cost for HRL-SAC, the environment
    reward for flat SAC; the meta-controller's, once its goal has run K steps or the episode ended, with the K-step
    discounted extrinsic return and discount ``meta_gamma ** k``.

@@ -558,11 +558,10 @@ def test_low_level_input_mask_ignores_the_coverage_map_and_only_for_hrl_sac():
 
 
 def test_runs_from_before_the_intensity_weighted_coverage_bonus_load_as_trained():
-    assert TrainConfig().coverage_by_intensity
     legacy = TrainConfig().to_dict()
     del legacy["coverage_by_intensity"]
-    assert not TrainConfig.from_dict(legacy).coverage_by_intensity
-    assert TrainConfig.from_dict(TrainConfig().to_dict()) == TrainConfig()
+    assert not TrainConfig.from_dict(legacy).coverage_by_intensity  # whole cells, as they were trained
+    assert TrainConfig.from_dict(TrainConfig(coverage_by_intensity=True).to_dict()).coverage_by_intensity
 
 
 def test_unknown_ignored_field_is_refused_with_the_field_names():
