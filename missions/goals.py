@@ -104,8 +104,9 @@ def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.
 
     A point inside an inflated zone moves out to its rim. When the straight leg crosses an inflated zone, the
     first one along the leg is passed on the side that makes the shorter way: the waypoint lies on the tangent
-    from the drone to the inflated circle, one inflated radius beyond the tangent point (past it, the way on
-    is clear of that zone). A drone inside an inflated zone, with the zone ahead, leaves it radially first.
+    from the drone to the inflated circle, one inflated radius beyond the tangent point. Reaching it grounds the
+    goal again (``SearchState.advance``), and so routes it again: several zones are passed one at a time. A drone
+    inside an inflated zone, with the zone ahead, leaves it radially first.
     Waypoints are kept ``FENCE_MARGIN_M`` inside the search area."""
     out = point.astype(np.float64, copy=True)
     centre, radius = obstacles[:, :, :2], obstacles[:, :, 2] + HAZARD_MARGIN_M

@@ -115,7 +115,7 @@ def test_goal_one_hot_and_goal_point_in_goal_conditioned_mode():
     # datum's (cell centres every 1000 m / 32; the datum's own cell is row 19, 9 m from the datum, 31 m further)
     obs = env.set_goal(TRACK_OBJECT)
     np.testing.assert_array_equal(field(obs, "goal"), [0, 0, 1, 0])
-    np.testing.assert_allclose(target_position(obs), [18.5 / 32, 18.5 / 32])
+    np.testing.assert_allclose(target_position(obs), [18.5 / 32, 18.5 / 32], atol=1e-6)  # float32 observation
     np.testing.assert_array_equal(env.meta_observation, obs[:272])
     with pytest.raises(ValueError, match=r"goal indices must be in \[0, 3\]"):
         env.set_goal(4)
@@ -347,11 +347,12 @@ def test_target_offset_is_the_direction_with_a_squashed_distance():
     from autonomy.observation import build_observations
     n = 3
     agent = np.zeros((n, 2))
-    target = np.array([[15.0, 0.0], [0.0, -100.0], [3000.0, 4000.0]])  # 15 m north, 100 m west, 5 km away
+    target = np.array([[15.0, 0.0], [0.0, -20.0], [3000.0, 4000.0]])  # 15 m north, 20 m west, 5 km away
     obs = build_observations(agent, target, np.tile([-500.0, 500.0, -500.0, 500.0], (n, 1)), np.zeros(n),
                              np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n), np.zeros(n),
                              np.zeros((n, 6), bool), np.zeros((n, 256)), np.full(n, -1))
     offsets = obs[:, FIELDS_BY_NAME["target_offset"].slice]
-    np.testing.assert_allclose(offsets[0], [15 / 115, 0.0], rtol=1e-6)  # resolves metres near the target
+    assert TARGET_OFFSET_SCALE_M == 20.0
+    np.testing.assert_allclose(offsets[0], [15 / 35, 0.0], rtol=1e-6)  # resolves metres near the target
     np.testing.assert_allclose(offsets[1], [0.0, -0.5], rtol=1e-6)  # length 0.5 at the scale distance
-    np.testing.assert_allclose(offsets[2], [0.6 * 5000 / 5100, 0.8 * 5000 / 5100], rtol=1e-6)  # saturates, < 1
+    np.testing.assert_allclose(offsets[2], [0.6 * 5000 / 5020, 0.8 * 5000 / 5020], rtol=1e-6)  # saturates, < 1
