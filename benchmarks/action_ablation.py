@@ -4,6 +4,8 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
   * deterministic: the evaluation's policy (tanh of the mean, both levels);
   * sampled_low_level: the low level's actions sampled from its squashed Gaussian (seeded generator);
   * intensity_forced_on: deterministic, but search intensity always 1 (the sensor always on);
+  * sensor_as_scripted: deterministic movement, but the sensor as the scripted searches set it (intensity 1,
+    zoom 0: the widest footprint);
   * full_speed: deterministic, but the movement command scaled to full speed in the policy's direction;
   * sampled_meta (HRL-SAC only): deterministic low level, goals sampled from the meta-controller's softmax;
   * scripted_low_level (HRL-SAC only): the learned meta-controller's goals, flown by a scripted low level (straight
@@ -32,7 +34,7 @@ import torch
 from autonomy.observation import FIELDS_BY_NAME
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
-from policies.baselines import fly_straight
+from policies.baselines import ZOOM as SCRIPTED_ZOOM, fly_straight
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.evaluation import episode_batch, run_episodes, summarise
 from policies.parallel_evaluation import padded
@@ -76,6 +78,11 @@ def main() -> int:
         actions[:, SEARCH_INTENSITY] = 1.0
         return actions
 
+    def sensor_as_scripted(core) -> np.ndarray:
+        actions = sensor_on(core)
+        actions[:, CAMERA_ZOOM] = SCRIPTED_ZOOM
+        return actions
+
     def full_speed(core) -> np.ndarray:
         actions = deterministic(core).copy()
         movement = actions[:, MOVEMENT]
@@ -94,7 +101,8 @@ def main() -> int:
         return padded(lambda meta_obs: policy.meta.act(normalise(meta_obs), deterministic=not sample))
 
     variants = {"deterministic": (deterministic, goals(False)), "sampled_low_level": (sampled, goals(False)),
-                "intensity_forced_on": (sensor_on, goals(False)), "full_speed": (full_speed, goals(False))}
+                "intensity_forced_on": (sensor_on, goals(False)), "sensor_as_scripted": (sensor_as_scripted, goals(False)),
+                "full_speed": (full_speed, goals(False))}
     if policy.hierarchical:
         variants["sampled_meta"] = (deterministic, goals(True))
         variants["scripted_low_level"] = (scripted_low_level, goals(False))
