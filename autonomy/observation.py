@@ -30,8 +30,8 @@ offset to a sub-goal point a cell or two away (31-62 m, where the search's goals
 (0.24-0.38), and the learned low level flew slowly towards such points; with 20 m its length is 0.61-0.76 there
 (HRL-SAC seed 0, 100,000 steps: test success 58.2 % -> 72.6 %, sub-goal reachability 53.7 % -> 80.0 %,
 docs/results/README.md). Version 2 changed only ``target_offset`` too: version 1 held the target's absolute
-position, normalised like ``agent_position``. A goal-conditioned low level then has to subtract two inputs among 276 to find its
-way, with a 15 m reach radius worth 1 % of the area; it reached 5 % of its sub-goals (docs/results/README.md).
+position, normalised like ``agent_position``. A goal-conditioned low level then has to subtract two inputs among
+276 to find its way, with a 15 m reach radius worth 1 % of the area; it reached 5 % of its sub-goals.
 The offset, squashed so that it resolves metres near the target and saturates far away, hands it the direction
 and the distance directly (docs/paper-notes.md).
 """

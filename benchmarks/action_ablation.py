@@ -101,8 +101,8 @@ def main() -> int:
         return padded(lambda meta_obs: policy.meta.act(normalise(meta_obs), deterministic=not sample))
 
     variants = {"deterministic": (deterministic, goals(False)), "sampled_low_level": (sampled, goals(False)),
-                "intensity_forced_on": (sensor_on, goals(False)), "sensor_as_scripted": (sensor_as_scripted, goals(False)),
-                "full_speed": (full_speed, goals(False))}
+                "intensity_forced_on": (sensor_on, goals(False)),
+                "sensor_as_scripted": (sensor_as_scripted, goals(False)), "full_speed": (full_speed, goals(False))}
     if policy.hierarchical:
         variants["sampled_meta"] = (deterministic, goals(True))
         variants["scripted_low_level"] = (scripted_low_level, goals(False))

@@ -140,5 +140,6 @@ def test_ground_goals_routes_every_goal_it_grounds():
                           np.repeat(AREA, 2, 0), np.zeros((2, 32, 32), np.float32), np.tile([600.0, 100.0], (2, 1)),
                           np.full(2, 80.0), np.array([[600.0, 100.0], [600.0, 0.0]]), np.array([False, True]),
                           np.zeros((2, 2)), zones, np.ones((2, 1), bool))
-    assert clearance((600.0, 0.0), points[0]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[0][0] < 600.0  # home, by a detour
+    # home, by a detour
+    assert clearance((600.0, 0.0), points[0]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[0][0] < 600.0
     assert clearance((0.0, 0.0), points[1]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[1][0] < 600.0
