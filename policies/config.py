@@ -164,6 +164,12 @@ class TrainConfig:
     the whole bonus (the detection probability is proportional to the intensity, while a cell counts as covered at
     any intensity >= 0.5). Off by default: on seed 0 (100,000 steps, 500 test scenarios) it raised the learned
     intensity, as meant, but not the success (68.0 % against 72.6 % without; docs/results/README.md)."""
+    coverage_swept: bool = False
+    """The coverage bonus counts the ground the camera footprint swept this step (distance flown x footprint
+    width, in grid cells, sensor on) instead of the newly covered cells. The low level does not see the coverage
+    map, so whether a cell is new is noise to it; the swept ground pays directly for what it controls: speed, the
+    sensor switched on and a wide footprint (zoom out). Where to search stays the goals' business. Off by default:
+    added after the comparison, with seed-0 probes only (docs/results/README.md)."""
 
     # --- bookkeeping
     checkpoint_every: int = 20_000

@@ -44,6 +44,7 @@ ACTION_LOW = np.array([-1.0, -1.0, 0.0, 0.0], dtype=np.float32)
 ACTION_HIGH = np.array([1.0, 1.0, 1.0, 1.0], dtype=np.float32)
 ACTION_NAMES = ("movement_north", "movement_east", "search_intensity", "camera_zoom")
 SEARCH_INTENSITY = ACTION_NAMES.index("search_intensity")
+CAMERA_ZOOM = ACTION_NAMES.index("camera_zoom")
 
 def next_episode_seed(seed: np.ndarray) -> np.ndarray:
     """The seed of the episode after one with ``seed`` (what an auto-reset uses)."""

@@ -8,7 +8,8 @@ Per vector step (``num_envs`` environments at once):
 3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
    ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) + a bonus per
-   newly covered cell (``coverage_bonus``; times the cell's search intensity with ``coverage_by_intensity``) +
+   newly covered cell (``coverage_bonus``; or per cell of ground swept by the footprint, ``coverage_swept``;
+   times the search intensity with ``coverage_by_intensity``) +
    ``extrinsic_weight`` x the environment reward without its constant per-step cost for HRL-SAC, the environment
    reward for flat SAC; the meta-controller's, once its goal has run K steps or the episode ended, with the K-step
    discounted extrinsic return and discount ``meta_gamma ** k``.
@@ -37,11 +38,12 @@ import numpy as np
 import torch
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM
+from missions import search
 from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
-from policies.env_core import ACTION_HIGH, ACTION_LOW, REWARD_STEP, SEARCH_INTENSITY, SarSearchConfig
+from policies.env_core import ACTION_HIGH, ACTION_LOW, CAMERA_ZOOM, REWARD_STEP, SEARCH_INTENSITY, SarSearchConfig
 from policies.normalizer import RunningMeanStd
 from policies.replay import PrioritizedReplayBuffer, linear_beta
 from policies.sac import SAC
@@ -143,6 +145,9 @@ class Trainer:
         core = self.env.core
         distance_before = np.hypot(*(core.position - core.goal_point).T)
         covered_before = core.covered_cells.copy()
+        position_before = core.position.copy()
+        area = core.scen.area  # read before the step: an auto-reset may load another scenario into the slot
+        cell_area_m2 = (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
@@ -156,11 +161,9 @@ class Trainer:
             # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
             goal_completed = info["goal_completed"]
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
-            newly_covered = info["coverage_ratio"] * core.coverage[0].size - covered_before
-            if cfg.coverage_by_intensity:  # detection is proportional to the intensity: pay for searching well
-                newly_covered = newly_covered * actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
+            searched = self._searched_cells(actions, info, covered_before, position_before, cell_area_m2)
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
-                          + cfg.coverage_bonus * newly_covered + cfg.extrinsic_weight * (reward - REWARD_STEP))
+                          + cfg.coverage_bonus * searched + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
         else:
             low_reward = reward
@@ -212,6 +215,20 @@ class Trainer:
                 self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
 
     # ------------------------------------------------------------------ the loop
+    def _searched_cells(self, actions: np.ndarray, info: dict, covered_before: np.ndarray,
+                        position_before: np.ndarray, cell_area_m2: np.ndarray) -> np.ndarray:
+        """What the low level's coverage bonus counts this step, in grid cells: the newly covered cells, or with
+        ``coverage_swept`` the ground the camera footprint swept (sensor on), either times the search intensity
+        with ``coverage_by_intensity``."""
+        cfg, intensity = self.config, actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
+        if cfg.coverage_swept:
+            step_m = np.hypot(*(info["position"] - position_before).T)
+            half_width = search.footprint_half_width_m(cfg.flight.altitude_m, actions[:, CAMERA_ZOOM].clip(0.0, 1.0))
+            searched = step_m * 2.0 * half_width / cell_area_m2 * (intensity >= search.SENSOR_ON_INTENSITY)
+        else:
+            searched = info["coverage_ratio"] * self.env.core.coverage[0].size - covered_before
+        return searched * intensity if cfg.coverage_by_intensity else searched
+
     def run(self, progress: bool = True, stop_at: int | None = None) -> Path:
         """Train to ``total_steps`` (or stop early at ``stop_at`` steps, for tests); returns the checkpoint path."""
         cfg = self.config

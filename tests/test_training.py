@@ -13,6 +13,7 @@ import torch
 
 from missions.goals import SEARCH_LOCATION
 from missions.mission import FlightSettings
+from missions.search import footprint_half_width_m
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
 from policies.evaluation import evaluate_checkpoint
@@ -99,20 +100,22 @@ def test_meta_updates_run_per_completed_meta_transition(tmp_path, per_transition
     assert trainer.meta.num_updates == per_transition * sum(learning_transitions)
 
 
-@pytest.mark.parametrize("kind, coverage_bonus, by_intensity", [("progress", 0.0, True), ("distance", 0.0, True),
-                                                               ("progress", 0.5, False), ("progress", 0.5, True)])
-def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity):
+@pytest.mark.parametrize("kind, coverage_bonus, by_intensity, swept", [
+    ("progress", 0.0, True, False), ("distance", 0.0, True, False), ("progress", 0.5, False, False),
+    ("progress", 0.5, True, False), ("progress", 0.5, False, True), ("progress", 0.5, True, True)])
+def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity, swept):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
                           extrinsic_weight=0.0, coverage_bonus=coverage_bonus, coverage_by_intensity=by_intensity,
-                          warmup_steps=1_000)
+                          coverage_swept=swept, warmup_steps=1_000)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
     def spy(actions):
         core = trainer.env.core
         captured["before"] = np.hypot(*(core.position - core.goal_point).T)
+        captured["start"] = core.position.copy()
         actions[:, 2] = (0.7, 0.9)  # in place: the sensor on in both environments, at two intensities
-        captured["intensity"] = actions[:, 2].copy()
+        captured["intensity"], captured["zoom"] = actions[:, 2].copy(), actions[:, 3].copy()
         result = real_step(actions)
         captured["info"] = result[4]
         return result
@@ -125,6 +128,11 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
     assert kind == "distance" or np.all(np.abs(toward) < 20.0)  # one step of flight, not a distance
     newly_covered = info["coverage_ratio"] * 1024  # the grid was empty before the first step
     assert coverage_bonus == 0.0 or newly_covered.any()
+    if swept:  # the ground the footprint swept, in 31.25 m cells: distance flown x footprint width
+        flown = np.hypot(*(info["position"] - captured["start"]).T)
+        width = 2.0 * footprint_half_width_m(config.flight.altitude_m, captured["zoom"])
+        newly_covered = flown * width / 31.25 ** 2
+        assert np.all(newly_covered > 0.0)
     if by_intensity:  # a cell covered at intensity 0.7 earns 0.7 of the bonus
         newly_covered = newly_covered * captured["intensity"]
     moved_on = np.hypot(*(trainer.env.core.goal_point - info["goal_point"]).T) > config.flight.reach_radius_m
