@@ -36,12 +36,13 @@ from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
 from policies.baselines import ZOOM as SCRIPTED_ZOOM, fly_straight
 from policies.checkpoint_policy import CheckpointPolicy
+from policies.env_core import CAMERA_ZOOM, SEARCH_INTENSITY
 from policies.evaluation import episode_batch, run_episodes, summarise
 from policies.parallel_evaluation import padded
 
 from common import results_file, write_report
 
-MOVEMENT, SEARCH_INTENSITY, CAMERA_ZOOM = slice(0, 2), 2, 3  # action components (docs/environment.md)
+MOVEMENT = slice(0, 2)  # the action's movement components (docs/environment.md)
 COVERAGE = FIELDS_BY_NAME["coverage"].slice
 
 

@@ -37,8 +37,9 @@ EXPLORE, SEARCH_LOCATION, TRACK_OBJECT, RETURN_TO_BASE = range(4)
 BLOCKS = 8  # ExploreArea works on an 8 x 8 grid of blocks
 DISTANCE_WEIGHT = 0.5
 TRAVEL_SCALE_M = 200.0
-"""SearchSpecificLocation discounts a cell's probability by exp(-distance / TRAVEL_SCALE_M) (a probe of 30-400 m
-with a scripted low level: 200 m gave the highest success, docs/environment.md)."""
+"""SearchSpecificLocation discounts a cell's probability by exp(-distance / TRAVEL_SCALE_M). Chosen by a quick
+look at a few scales (30-400 m) with a scripted low level, not a committed script; with it, the scripted hierarchy
+of ``benchmarks/action_ablation.py`` reaches the figure docs/environment.md gives."""
 FENCE_MARGIN_M = 20.0
 """Every goal point is kept this far inside the search area (the geofence of training), so that a drone arriving
 at full speed does not carry on across the fence."""

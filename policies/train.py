@@ -145,9 +145,7 @@ class Trainer:
         core = self.env.core
         distance_before = np.hypot(*(core.position - core.goal_point).T)
         covered_before = core.covered_cells.copy()
-        position_before = core.position.copy()
-        area = core.scen.area  # read before the step: an auto-reset may load another scenario into the slot
-        cell_area_m2 = (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size
+        swept_from = self._sweep_start() if self.hrl and cfg.coverage_swept else None
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
@@ -161,7 +159,7 @@ class Trainer:
             # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
             goal_completed = info["goal_completed"]
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
-            searched = self._searched_cells(actions, info, covered_before, position_before, cell_area_m2)
+            searched = self._searched_cells(actions, info, covered_before, swept_from)
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
                           + cfg.coverage_bonus * searched + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
@@ -214,14 +212,21 @@ class Trainer:
                 self.meta_buffer.update_priorities(indices, td)
                 self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
 
-    # ------------------------------------------------------------------ the loop
+    def _sweep_start(self) -> tuple[np.ndarray, np.ndarray]:
+        """The positions and grid-cell areas (m^2) before a step, for ``coverage_swept``; read before the step,
+        since an auto-reset may load another scenario into a slot."""
+        core = self.env.core
+        area = core.scen.area
+        return core.position.copy(), (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size
+
     def _searched_cells(self, actions: np.ndarray, info: dict, covered_before: np.ndarray,
-                        position_before: np.ndarray, cell_area_m2: np.ndarray) -> np.ndarray:
+                        swept_from: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
         """What the low level's coverage bonus counts this step, in grid cells: the newly covered cells, or with
         ``coverage_swept`` the ground the camera footprint swept (sensor on), either times the search intensity
         with ``coverage_by_intensity``."""
         cfg, intensity = self.config, actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
-        if cfg.coverage_swept:
+        if swept_from is not None:
+            position_before, cell_area_m2 = swept_from
             step_m = np.hypot(*(info["position"] - position_before).T)
             half_width = search.footprint_half_width_m(cfg.flight.altitude_m, actions[:, CAMERA_ZOOM].clip(0.0, 1.0))
             searched = step_m * 2.0 * half_width / cell_area_m2 * (intensity >= search.SENSOR_ON_INTENSITY)
@@ -229,6 +234,7 @@ class Trainer:
             searched = info["coverage_ratio"] * self.env.core.coverage[0].size - covered_before
         return searched * intensity if cfg.coverage_by_intensity else searched
 
+    # ------------------------------------------------------------------ the loop
     def run(self, progress: bool = True, stop_at: int | None = None) -> Path:
         """Train to ``total_steps`` (or stop early at ``stop_at`` steps, for tests); returns the checkpoint path."""
         cfg = self.config

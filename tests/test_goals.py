@@ -143,3 +143,15 @@ def test_ground_goals_routes_every_goal_it_grounds():
     # home, by a detour
     assert clearance((600.0, 0.0), points[0]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[0][0] < 600.0
     assert clearance((0.0, 0.0), points[1]) >= HAZARD_MARGIN_M - 1e-6 and 0.0 < points[1][0] < 600.0
+
+
+def test_goal_points_stay_inside_the_area_by_the_fence_margin():
+    from missions.goals import FENCE_MARGIN_M
+
+    # a detection and a home right on the area's edges (AREA: north -50..950, east -500..500)
+    points = ground_goals(np.array([TRACK_OBJECT, RETURN_TO_BASE]), np.zeros((2, 2)), np.repeat(AREA, 2, 0),
+                          np.zeros((2, 32, 32), np.float32), np.tile([600.0, 100.0], (2, 1)), np.full(2, 80.0),
+                          np.array([[950.0, -500.0], [0.0, 0.0]]), np.array([True, False]),
+                          np.array([[0.0, 0.0], [-50.0, 500.0]]))
+    np.testing.assert_allclose(points, [[950.0 - FENCE_MARGIN_M, -500.0 + FENCE_MARGIN_M],
+                                        [-50.0 + FENCE_MARGIN_M, 500.0 - FENCE_MARGIN_M]])
