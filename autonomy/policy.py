@@ -3,8 +3,8 @@
 A companion computer has the artifact and this package, not the training code: nothing here imports
 ``policies`` (or gymnasium); tests/test_export.py loads and runs an artifact with ``policies`` hidden.
 
-Before any weight is loaded, :func:`load_policy` checks the file (a zip archive, complete, every member's
-CRC-32 intact) and its manifest (a format version this runtime knows, the same observation layout as
+Before any weight is loaded, :func:`load_policy` checks the file (a zip archive, complete, its SHA-256 seal
+intact: ``autonomy.artifact_seal``) and its manifest (a format version this runtime knows, the same observation layout as
 ``autonomy.observation``, the same goals as ``missions.goals``). Whatever is wrong is raised as one
 :class:`PolicyArtifactError` whose message is one line naming the file and the problem: flying a policy that
 reads a different observation than the one it is given would fail silently, so a mismatch is refused.
@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from autonomy.artifact_seal import ZIP_END, ZIP_END_SIZE, SealError, is_sealed, unseal
 from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
 
 ZIP_MAGIC = b"PK\x03\x04"
-ZIP_END = b"PK\x05\x06"
 # Names of the two programs in a torch-export artifact (a PT2 archive). "model" is the name plain
 # torch.export.load reads, so that call alone gives the every-step program.
 ACT_PROGRAM = "model"
@@ -100,10 +100,10 @@ def load_policy(path: Path | str) -> Policy:
         raise PolicyArtifactError(f"{path}: no such file") from None
     except OSError as exc:
         raise PolicyArtifactError(f"{path}: cannot read the file ({exc.strerror})") from None
-    manifest = read_manifest(data, str(path))
+    manifest, archive = read_manifest(data, str(path))
     check_compatible(manifest, str(path))
     try:
-        act, select_goal = _LOADERS[manifest.format](data)
+        act, select_goal = _LOADERS[manifest.format](archive)
     except Exception as exc:  # torch raises anything from RuntimeError to pickle errors for a bad program
         raise PolicyArtifactError(f"{path}: the {manifest.format} program does not load "
                                   f"({one_line(exc)})") from None
@@ -118,35 +118,38 @@ def one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
-def read_manifest(data: bytes, name: str) -> PolicyManifest:
-    """The manifest of an artifact's bytes, after checking that the archive is complete and intact."""
+def read_manifest(data: bytes, name: str) -> tuple[PolicyManifest, bytes]:
+    """The manifest of an artifact's bytes and the archive as torch wrote it, after checking its seal."""
     if not data.startswith(ZIP_MAGIC):
         raise PolicyArtifactError(f"{name}: not a policy artifact (not a zip archive; expected a file written "
                                   "by 'hrlsac export')")
-    try:
-        # torch writes the end record last, without a comment. Where it is not last, zipfile would search back
+    if is_sealed(data):
+        try:
+            archive = unseal(data)
+        except SealError as exc:
+            raise PolicyArtifactError(f"{name}: corrupt file ({exc}; copy the artifact again)") from None
+    elif data[-ZIP_END_SIZE:-ZIP_END_SIZE + 4] == ZIP_END:
+        archive = None  # a zip as torch writes it: not ours, or damaged where the seal was; told apart below
+    else:
+        # Checked here rather than left to zipfile: where the end record is not last, zipfile would search back
         # and may find the end record of an archive nested inside (a PT2 archive holds torch.save files).
-        if data[-22:-18] != ZIP_END:
-            raise zipfile.BadZipFile("no end record at the end")
-        archive = zipfile.ZipFile(io.BytesIO(data))
-    except Exception as exc:  # BadZipFile, but a damaged header also gives UnicodeDecodeError, struct.error, ...
-        reason = ("the zip archive has no valid end record" if isinstance(exc, zipfile.BadZipFile)
-                  else f"its zip directory is unreadable: {one_line(exc)}")
-        raise PolicyArtifactError(f"{name}: truncated or damaged file ({reason}; copy the artifact again)") from None
-    members = [m for m in archive.namelist() if m.split("/")[-2:] == ["extra", MANIFEST_FILE]]
-    if len(members) != 1:
+        raise PolicyArtifactError(f"{name}: truncated or damaged file (no zip end record at the end; copy the "
+                                  "artifact again)")
+    try:
+        members = zipfile.ZipFile(io.BytesIO(archive or data)).namelist()
+    except Exception as exc:  # BadZipFile, but a damaged directory also gives UnicodeDecodeError, struct.error, ...
+        raise PolicyArtifactError(f"{name}: truncated or damaged file (its zip directory is unreadable: "
+                                  f"{one_line(exc)}; copy the artifact again)") from None
+    manifests = [m for m in members if m.split("/")[-2:] == ["extra", MANIFEST_FILE]]
+    if len(manifests) != 1:
         raise PolicyArtifactError(f"{name}: not a policy artifact (no {MANIFEST_FILE} inside; "
-                                  f"{_what_archive(archive.namelist())})")
+                                  f"{_what_archive(members)})")
+    if archive is None:
+        raise PolicyArtifactError(f"{name}: no seal at the end of the file (damaged there, or exported before "
+                                  "'hrlsac export' sealed its artifacts; export it again)")
     try:
-        damaged = archive.testzip()  # reads every member and checks its CRC-32
-        text = archive.read(members[0]) if damaged is None else b""
-    except Exception as exc:  # zlib.error, EOFError, BadZipFile, NotImplementedError (a flipped method byte), ...
-        raise PolicyArtifactError(f"{name}: corrupt file ({one_line(exc)}; copy the artifact again)") from None
-    if damaged is not None:
-        raise PolicyArtifactError(f"{name}: corrupt file (checksum mismatch in {damaged}; copy the artifact "
-                                  "again)")
-    try:
-        return PolicyManifest.from_json(text)
+        text = zipfile.ZipFile(io.BytesIO(archive)).read(manifests[0])
+        return PolicyManifest.from_json(text), archive
     except (ValueError, TypeError) as exc:
         raise PolicyArtifactError(f"{name}: {exc}") from None
 

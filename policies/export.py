@@ -24,6 +24,7 @@ from pathlib import Path
 
 import torch
 
+from autonomy.artifact_seal import seal
 from autonomy.observation import META_OBS_DIM, OBS_DIM
 from autonomy.policy import ACT_PROGRAM, GOAL_PROGRAM, load_policy
 from autonomy.policy_manifest import (
@@ -157,7 +158,7 @@ def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
 
 
 def artifact_bytes(module: PolicyModule, manifest: PolicyManifest) -> bytes:
-    """The artifact of ``module`` in ``manifest.format``, with ``manifest`` inside."""
+    """The artifact of ``module`` in ``manifest.format``, with ``manifest`` inside, sealed (``artifact_seal``)."""
     extra = {MANIFEST_FILE: manifest.to_json()}
     buffer = io.BytesIO()
     if manifest.format == "torchscript":
@@ -169,7 +170,7 @@ def artifact_bytes(module: PolicyModule, manifest: PolicyManifest) -> bytes:
         pt2_archive().package_pt2(buffer, exported_programs=programs, extra_files=extra)
     else:
         raise ValueError(f"unknown artifact format {manifest.format!r} (choose torchscript or torch-export)")
-    return buffer.getvalue()
+    return seal(buffer.getvalue())
 
 
 def exported_program(head: torch.nn.Module, width: int) -> torch.export.ExportedProgram:

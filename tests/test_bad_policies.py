@@ -21,6 +21,7 @@ from cli_harness import assert_clean_error, run_cli
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from autonomy.artifact_seal import seal
 from autonomy.policy import PolicyArtifactError, load_policy
 from autonomy.policy_cli import info_lines
 from autonomy.policy_manifest import MANIFEST_FILE
@@ -73,11 +74,11 @@ def artifact(policy, tmp_path_factory) -> Artifact:
 
 
 def with_manifest(scripted, text: str | bytes) -> bytes:
-    """An artifact of the real program with ``text`` as its manifest.json."""
+    """An artifact of the real program with ``text`` as its manifest.json, sealed as ``hrlsac export`` does."""
     buffer = io.BytesIO()
     with torchscript_calls():
         torch.jit.save(scripted, buffer, _extra_files={MANIFEST_FILE: text})
-    return buffer.getvalue()
+    return seal(buffer.getvalue())
 
 
 def outcome(path: Path) -> str:
@@ -105,15 +106,38 @@ def test_truncated_artifacts_are_refused(tmp_path, artifact, data):
 
 @settings(FUZZ, max_examples=60)
 @given(data=st.data())
-def test_flipped_bytes_are_refused_or_harmless(tmp_path, artifact, data):
-    # A flip in a member's data fails its CRC-32; in a header it damages the archive; in a few padding bytes it
-    # changes nothing the runtime reads (then the artifact loads and runs, which is fine).
+def test_flipped_bytes_are_refused(tmp_path, artifact, data):
+    # Anywhere: in a member's data, a header, the padding between members (which no CRC-32 covers), the seal.
     damaged = bytearray(artifact.data)
-    for position in data.draw(st.lists(st.integers(0, len(damaged) - 1), min_size=1, max_size=4), label="at"):
+    for position in data.draw(st.lists(st.integers(0, len(damaged) - 1), min_size=1, max_size=4, unique=True),
+                              label="at"):
         damaged[position] ^= data.draw(st.integers(1, 255), label="xor")
     path = tmp_path / "policy.pt"
     path.write_bytes(bytes(damaged))
-    event("loads" if outcome(path) == "loaded" else "clean error")
+    message = outcome(path)
+    assert "corrupt file" in message or "truncated or damaged file" in message or "not a policy artifact" in message
+
+
+def test_every_byte_is_covered_by_the_seal(tmp_path, artifact):
+    # Every 16th byte flipped in turn, so that every zip structure is hit: local headers, their padding, the
+    # central directory, the end record, the seal itself. CRC-32s alone missed flips in padding.
+    path = tmp_path / "policy.pt"
+    for position in range(0, len(artifact.data), 16):
+        damaged = bytearray(artifact.data)
+        damaged[position] ^= 0x20
+        path.write_bytes(bytes(damaged))
+        assert outcome(path) != "loaded", f"a flip at byte {position} of {len(damaged)} went unnoticed"
+
+
+def test_an_unsealed_artifact_is_refused(tmp_path, scripted, manifest_data):
+    buffer = io.BytesIO()
+    with torchscript_calls():
+        torch.jit.save(scripted, buffer, _extra_files={MANIFEST_FILE: json.dumps(manifest_data)})
+    path = tmp_path / "policy.pt"
+    path.write_bytes(buffer.getvalue())
+    assert "no seal at the end of the file" in outcome(path) and "export it again" in outcome(path)
+    path.write_bytes(seal(buffer.getvalue()))
+    assert outcome(path) == "loaded"
 
 
 @settings(FUZZ, max_examples=100)
@@ -218,6 +242,7 @@ def test_other_files_passed_as_an_artifact(tmp_path, scripted, manifest_data):
     with torchscript_calls():
         linear = torch.jit.script(torch.nn.Linear(3, 2))
         torch.jit.save(linear, str(other), _extra_files={MANIFEST_FILE: json.dumps(manifest_data)})
+    other.write_bytes(seal(other.read_bytes()))  # sealed: only its program is wrong
     plain = tmp_path / "plain.pt"
     with torchscript_calls():
         torch.jit.save(linear, str(plain))
