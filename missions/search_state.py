@@ -57,6 +57,9 @@ class StepOutcome:
     unsearched cell reached with the sensor off stays unsearched, and its goal grounds to the same point)."""
     step_goal_point: np.ndarray
     """(N, 2) the goal point this step flew towards (before any re-grounding)."""
+    first_detection_chance: np.ndarray
+    """The probability that this step detected the victim for the first time: its detection probability this
+    step where it had not been detected before, else 0 (the expected value of the first-detection event)."""
 
 
 class SearchState:
@@ -142,6 +145,7 @@ class SearchState:
         primary = scen.primary_index
         victim_seen = detected[self._arange, primary]
         self.last_detection[victim_seen] = self.targets[self._arange, primary][victim_seen]
+        first_chance = probability[self._arange, primary] * ~self.has_detection
         first = victim_seen & ~self.has_detection
         self.first_detection_step[first] = self.steps[first]
         self.has_detection |= victim_seen
@@ -157,7 +161,8 @@ class SearchState:
         if goal_reached.any():
             self.ground(goal_reached)
         moved_on = goal_reached & (np.hypot(*(self.goal_point - step_goal_point).T) > flight.reach_radius_m)
-        return StepOutcome(success, collision, out_of_bounds, distance, goal_reached, moved_on, step_goal_point)
+        return StepOutcome(success, collision, out_of_bounds, distance, goal_reached, moved_on, step_goal_point,
+                           first_chance)
 
     @property
     def coverage_ratio(self) -> np.ndarray:

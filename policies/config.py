@@ -164,6 +164,12 @@ class TrainConfig:
     the whole bonus (the detection probability is proportional to the intensity, while a cell counts as covered at
     any intensity >= 0.5). Off by default: on seed 0 (100,000 steps, 500 test scenarios) it raised the learned
     intensity, as meant, but not the success (68.0 % against 72.6 % without; docs/results/README.md)."""
+    detection_bonus: float = 0.0
+    """Low-level reward times the probability that this step detects the victim for the first time (its
+    detection probability where it is in the camera's view, 0 once it has been detected): the expected value of
+    the detection the search is for, which pays for what the sensor settings do (intensity, zoom against the
+    footprint's width) where the coverage bonus cannot tell. The probability uses the hidden victim, as the
+    environment's own reward does; it is a training signal only, never an input. 0 = off."""
     coverage_swept: bool = False
     """The coverage bonus counts the ground the camera footprint swept this step (distance flown x footprint
     width, in grid cells, sensor on) instead of the newly covered cells. The low level does not see the coverage
@@ -207,7 +213,8 @@ class TrainConfig:
                                 ("meta_gamma", 0.0, 1.0),
                                 ("tau", 0.0, 1.0), ("updates_per_step", 0.0, 64.0), ("per_alpha", 0.0, 1.0),
                                 ("per_beta_start", 0.0, 1.0), ("meta_target_entropy_scale", 0.0, 1.0),
-                                ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6)):
+                                ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6),
+                                ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")

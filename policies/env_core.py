@@ -209,6 +209,7 @@ class SarSearchBatch(SearchState):
                 "position": self.position, "goal_point": out.step_goal_point, "goal_reached": out.goal_reached,
                 # A sub-goal is completed when reaching it moves the search on, or on the episode's last step.
                 "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
+                "first_detection_chance": out.first_detection_chance,
                 "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 

@@ -9,7 +9,8 @@ Per vector step (``num_envs`` environments at once):
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
    ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) + a bonus per
    newly covered cell (``coverage_bonus``; or per cell of ground swept by the footprint, ``coverage_swept``;
-   times the search intensity with ``coverage_by_intensity``) +
+   times the search intensity with ``coverage_by_intensity``) + ``detection_bonus`` x the probability that the
+   step detects the victim for the first time +
    ``extrinsic_weight`` x the environment reward without its constant per-step cost for HRL-SAC, the environment
    reward for flat SAC; the meta-controller's, once its goal has run K steps or the episode ended, with the K-step
    discounted extrinsic return and discount ``meta_gamma ** k``.
@@ -161,7 +162,8 @@ class Trainer:
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
             searched = self._searched_cells(actions, info, covered_before, swept_from)
             low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
-                          + cfg.coverage_bonus * searched + cfg.extrinsic_weight * (reward - REWARD_STEP))
+                          + cfg.coverage_bonus * searched + cfg.detection_bonus * info["first_detection_chance"]
+                          + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached
         else:
             low_reward = reward

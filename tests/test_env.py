@@ -254,6 +254,24 @@ def test_victim_under_the_drone_in_clear_daylight_is_detected_and_conditions_low
     assert detection_rate(Conditions(sea=SeaState.ROUGH)) < clear - 0.2
 
 
+def test_first_detection_chance_is_the_victims_detection_probability_until_it_is_seen():
+    # Victim 12 m east, in view at 20 m (model p = 0.61 at full intensity); a far victim is never in view.
+    near = env_for(scenario(victim=(0.0, 12.0), datum=(300.0, -200.0)), altitude_m=20.0, reach_radius_m=1.0)
+    near.reset(seed=0)
+    chances, seen = [], []
+    for intensity in (0.5, 1.0, 1.0, 1.0, 1.0, 1.0):
+        info = near.step(np.array([0.0, 0.0, intensity, 0.0], dtype=np.float32))[4]
+        chances.append(float(info["first_detection_chance"]))
+        seen.append(bool(info["victim_detected"]))
+    first = seen.index(True)  # the chance is paid up to and including the step that detects
+    assert all(chance > 0.25 for chance in chances[:first + 1]) and chances[first + 1:] == [0.0] * (5 - first)
+    if first > 0:  # detection probability is proportional to the intensity
+        assert chances[0] == pytest.approx(chances[1] / 2, rel=0.05)
+    far = env_for(scenario(), altitude_m=20.0)
+    far.reset(seed=0)
+    assert far.step(np.array([0.0, 0.0, 1.0, 0.0], dtype=np.float32))[4]["first_detection_chance"] == 0.0
+
+
 def test_coverage_never_decreases_over_a_random_flight():
     env = SarSearchEnv(SarSearchConfig(split="train"))
     obs, _ = env.reset(seed=11)

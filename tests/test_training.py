@@ -100,13 +100,15 @@ def test_meta_updates_run_per_completed_meta_transition(tmp_path, per_transition
     assert trainer.meta.num_updates == per_transition * sum(learning_transitions)
 
 
-@pytest.mark.parametrize("kind, coverage_bonus, by_intensity, swept", [
-    ("progress", 0.0, True, False), ("distance", 0.0, True, False), ("progress", 0.5, False, False),
-    ("progress", 0.5, True, False), ("progress", 0.5, False, True), ("progress", 0.5, True, True)])
-def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity, swept):
+@pytest.mark.parametrize("kind, coverage_bonus, by_intensity, swept, detection_bonus", [
+    ("progress", 0.0, True, False, 0.0), ("distance", 0.0, True, False, 0.0), ("progress", 0.5, False, False, 0.0),
+    ("progress", 0.5, True, False, 0.0), ("progress", 0.5, False, True, 0.0), ("progress", 0.5, True, True, 0.0),
+    ("progress", 0.0, False, False, 3.0)])
+def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity, swept,
+                                                             detection_bonus):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
                           extrinsic_weight=0.0, coverage_bonus=coverage_bonus, coverage_by_intensity=by_intensity,
-                          coverage_swept=swept, warmup_steps=1_000)
+                          coverage_swept=swept, detection_bonus=detection_bonus, warmup_steps=1_000)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
@@ -115,12 +117,19 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
         captured["before"] = np.hypot(*(core.position - core.goal_point).T)
         captured["start"] = core.position.copy()
         actions[:, 2] = (0.7, 0.9)  # in place: the sensor on in both environments, at two intensities
+        if detection_bonus:
+            actions[:, 3] = 0.0  # zoomed out: a 35 m footprint half-width at 50 m
         captured["intensity"], captured["zoom"] = actions[:, 2].copy(), actions[:, 3].copy()
         result = real_step(actions)
         captured["info"] = result[4]
         return result
 
     trainer.env.step = spy
+    if detection_bonus:  # environment 0 starts beside its victim, in the camera's view (not within reach)
+        core = trainer.env.core
+        victim = core.targets[0, core.scen.primary_index[0]]
+        core.vehicles.north_m[0], core.vehicles.east_m[0] = victim[0] + 20.0, victim[1]
+        core.position[0] = victim + (20.0, 0.0)
     trainer.collect()
     info = captured["info"]
     distance = np.hypot(*(info["position"] - info["goal_point"]).T)
@@ -137,7 +146,9 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
         newly_covered = newly_covered * captured["intensity"]
     moved_on = np.hypot(*(trainer.env.core.goal_point - info["goal_point"]).T) > config.flight.reach_radius_m
     completed = (distance <= config.flight.reach_radius_m) & moved_on
-    expected = toward / 100.0 + completed + coverage_bonus * newly_covered
+    chance = info["first_detection_chance"]
+    assert detection_bonus == 0.0 or (chance[0] > 0.05 and chance[1] == 0.0)
+    expected = toward / 100.0 + completed + coverage_bonus * newly_covered + detection_bonus * chance
     np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], expected, rtol=1e-5, atol=1e-7)
 
 
