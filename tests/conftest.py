@@ -6,6 +6,14 @@ import socket
 
 # pymavlink clients in the tests speak MAVLink 2 from the first byte (set before mavutil is imported).
 os.environ.setdefault("MAVLINK20", "1")
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # make test runs one worker per core: a torch spreading its work over every core in each worker would
+    # oversubscribe them (the Stable-Baselines3 test took 286 s beside two training processes with torch's
+    # default threads, 11 s with one). Subprocesses inherit the variable.
+    os.environ["OMP_NUM_THREADS"] = "1"
+    import torch
+
+    torch.set_num_threads(1)
 
 import pytest  # noqa: E402
 
