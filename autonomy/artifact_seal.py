@@ -24,9 +24,14 @@ class SealError(ValueError):
     """The bytes are not a sealed archive, or not the archive that was sealed."""
 
 
+def ends_with_zip_end(data: bytes) -> bool:
+    """Whether the last bytes of ``data`` are a zip end record without a comment, as torch writes it."""
+    return data[-ZIP_END_SIZE:-ZIP_END_SIZE + 4] == ZIP_END and data[-2:] == b"\0\0"
+
+
 def seal(archive: bytes) -> bytes:
     """``archive`` (a zip whose end record is last, without a comment, as torch writes it) with its seal."""
-    if archive[-ZIP_END_SIZE:-ZIP_END_SIZE + 4] != ZIP_END or archive[-2:] != b"\0\0":
+    if not ends_with_zip_end(archive):
         raise ValueError("can only seal a zip archive that ends with its end record and has no comment")
     digest = hashlib.sha256(archive).hexdigest().encode()
     return archive[:-2] + struct.pack("<H", SEAL_SIZE) + SEAL_PREFIX + digest

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from autonomy.artifact_seal import ZIP_END, ZIP_END_SIZE, SealError, is_sealed, unseal
+from autonomy.artifact_seal import SealError, ends_with_zip_end, is_sealed, unseal
 from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
@@ -128,7 +128,7 @@ def read_manifest(data: bytes, name: str) -> tuple[PolicyManifest, bytes]:
             archive = unseal(data)
         except SealError as exc:
             raise PolicyArtifactError(f"{name}: corrupt file ({exc}; copy the artifact again)") from None
-    elif data[-ZIP_END_SIZE:-ZIP_END_SIZE + 4] == ZIP_END:
+    elif ends_with_zip_end(data):
         archive = None  # a zip as torch writes it: not ours, or damaged where the seal was; told apart below
     else:
         # Checked here rather than left to zipfile: where the end record is not last, zipfile would search back
@@ -136,7 +136,8 @@ def read_manifest(data: bytes, name: str) -> tuple[PolicyManifest, bytes]:
         raise PolicyArtifactError(f"{name}: truncated or damaged file (no zip end record at the end; copy the "
                                   "artifact again)")
     try:
-        members = zipfile.ZipFile(io.BytesIO(archive or data)).namelist()
+        zip_file = zipfile.ZipFile(io.BytesIO(archive or data))
+        members = zip_file.namelist()
     except Exception as exc:  # BadZipFile, but a damaged directory also gives UnicodeDecodeError, struct.error, ...
         raise PolicyArtifactError(f"{name}: truncated or damaged file (its zip directory is unreadable: "
                                   f"{one_line(exc)}; copy the artifact again)") from None
@@ -148,7 +149,7 @@ def read_manifest(data: bytes, name: str) -> tuple[PolicyManifest, bytes]:
         raise PolicyArtifactError(f"{name}: no seal at the end of the file (damaged there, or exported before "
                                   "'hrlsac export' sealed its artifacts; export it again)")
     try:
-        text = zipfile.ZipFile(io.BytesIO(archive)).read(manifests[0])
+        text = zip_file.read(manifests[0])
         return PolicyManifest.from_json(text), archive
     except (ValueError, TypeError) as exc:
         raise PolicyArtifactError(f"{name}: {exc}") from None

@@ -135,7 +135,8 @@ def test_an_unsealed_artifact_is_refused(tmp_path, scripted, manifest_data):
         torch.jit.save(scripted, buffer, _extra_files={MANIFEST_FILE: json.dumps(manifest_data)})
     path = tmp_path / "policy.pt"
     path.write_bytes(buffer.getvalue())
-    assert "no seal at the end of the file" in outcome(path) and "export it again" in outcome(path)
+    message = outcome(path)
+    assert "no seal at the end of the file" in message and "export it again" in message
     path.write_bytes(seal(buffer.getvalue()))
     assert outcome(path) == "loaded"
 
