@@ -117,7 +117,8 @@ class TrainConfig:
     per_alpha: float = 0.6
     """How strongly priorities skew sampling (0 = uniform)."""
     per_beta_start: float = 0.4
-    """Importance-weight exponent at the start, annealed linearly to 1 over the run."""
+    """Importance-weight exponent at the start, annealed linearly to 1 over the run (over the steps before the
+    meta-only phase, ``meta_only_steps``; 1 during it)."""
     per_eps: float = 1e-6
     """Added to |TD error| so that no transition gets priority 0."""
 
@@ -138,6 +139,17 @@ class TrainConfig:
     """Floor on the meta temperature, a second guard against a deterministic meta-policy."""
     meta_updates_per_transition: int = 1
     """Meta-controller gradient updates per completed meta transition (one every K steps per environment)."""
+    meta_only_steps: int = 0
+    """HRL-SAC: the last this many of ``total_steps`` train the meta-controller alone, against the low level as it
+    will fly: the low-level networks and the observation normaliser are frozen, the low level acts with its mean
+    action (as an exported policy does), and the meta replay buffer is emptied when this phase starts (its
+    transitions came from a low level still learning, with exploration noise). While both levels learn, the
+    meta-controller's K-step returns depend on a moving low level; this phase gives it a fixed one. Steps of
+    this phase cost no low-level update, so they run several times faster. 0 = off."""
+    meta_only_entropy_scale: float = 0.1
+    """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
+    that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
+    low level it only makes the meta-controller's values those of a near-random choice of goals."""
     intrinsic_reward: str = "progress"
     """Low-level reward towards the goal point g: "distance" is the paper's -||s' - g|| / intrinsic_scale_m;
     "progress" is (||s - g|| - ||s' - g||) / intrinsic_scale_m, the same signal as potential-based shaping.
@@ -184,9 +196,17 @@ class TrainConfig:
     checkpoint_every: int = 20_000
     """Environment steps between checkpoints (written atomically; --resume continues from the last)."""
     eval_every: int = 10_000
-    """Environment steps between quick evaluations on the val split (0 = never)."""
+    """Environment steps between quick evaluations: the deterministic policy as it stands flies the first
+    ``eval_episodes`` scenarios of the val split; the success rate is logged (``eval_success_rate``). They use
+    no random generator of the run, so they do not change its training. 0 = never."""
     eval_episodes: int = 32
-    """Episodes per quick evaluation."""
+    """Episodes per quick evaluation (500 take about 10 s here)."""
+    meta_keep_best: bool = False
+    """HRL-SAC with a meta-only phase: the run ends with the meta-controller (its actor, the part that acts) of the
+    quick evaluation with the highest val success within the phase, counting the one at its first step (the
+    meta-controller of the joint phase), instead of the last one. Model selection on the val split (as
+    Stable-Baselines3's EvalCallback keeps its best model), so the test split stays untouched; it needs
+    ``eval_every`` > 0, and it judges best with ``eval_episodes`` episodes (use a few hundred)."""
     log_every: int = 1_000
     """Environment steps between CSV / TensorBoard log rows."""
     torch_threads: int = 1
@@ -207,7 +227,8 @@ class TrainConfig:
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
                                 ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1),
-                                ("meta_updates_per_transition", 1, 64)):
+                                ("meta_updates_per_transition", 1, 64), ("meta_only_steps", 0, 10**10),
+                                ("eval_every", 0, 10**10), ("eval_episodes", 1, 100_000)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 raise ValueError(f"TrainConfig.{name} must be an integer in [{low}, {high}], got {value!r}")
@@ -215,11 +236,25 @@ class TrainConfig:
                                 ("meta_gamma", 0.0, 1.0),
                                 ("tau", 0.0, 1.0), ("updates_per_step", 0.0, 64.0), ("per_alpha", 0.0, 1.0),
                                 ("per_beta_start", 0.0, 1.0), ("meta_target_entropy_scale", 0.0, 1.0),
-                                ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6),
+                                ("meta_only_entropy_scale", 0.0, 1.0), ("initial_alpha", 1e-6, 100.0),
+                                ("intrinsic_scale_m", 1e-3, 1e6),
                                 ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        if self.meta_keep_best and (self.eval_every <= 0 or self.meta_only_steps <= 0):
+            raise ValueError("TrainConfig.meta_keep_best needs a meta-only phase and quick evaluations to choose "
+                             f"from: set meta_only_steps and eval_every above 0 (got {self.meta_only_steps} and "
+                             f"{self.eval_every})")
+        if self.meta_only_steps >= self.total_steps:
+            raise ValueError(f"TrainConfig.meta_only_steps ({self.meta_only_steps:,}) must be below total_steps "
+                             f"({self.total_steps:,}): the low level has to learn before the meta-controller "
+                             f"trains alone against it")
+
+    @property
+    def meta_only_from(self) -> int:
+        """The environment step from which only the meta-controller learns (``total_steps`` when never)."""
+        return self.total_steps - self.meta_only_steps if self.algo == "hrl-sac" else self.total_steps
 
     @property
     def low_level_input_mask(self) -> np.ndarray | None:

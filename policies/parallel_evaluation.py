@@ -65,8 +65,12 @@ def padded(fn: Callable[[np.ndarray], np.ndarray], rows: int = MIN_POLICY_ROWS) 
 def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
     """The per-episode outcome arrays of one chunk (runs in a worker, or in this process)."""
     policy = CheckpointPolicy.from_state(chunk.policy_state, Path(chunk.checkpoint))
-    core = episode_batch(chunk.split, chunk.episodes, policy.config.flight, goal_conditioned=policy.hierarchical,
-                         slots=chunk.slots)
+    return fly_policy(policy, episode_batch(chunk.split, chunk.episodes, policy.config.flight,
+                                            goal_conditioned=policy.hierarchical, slots=chunk.slots))
+
+
+def fly_policy(policy: CheckpointPolicy, core) -> dict[str, np.ndarray]:
+    """The per-episode outcome arrays of ``policy`` (deterministic, padded calls) flying every slot of ``core``."""
     act = padded(policy.act)
     return run_episodes(core, lambda batch: act(batch.obs), padded(policy.choose_goals) if policy.hierarchical else None)
 

@@ -17,6 +17,10 @@ Per vector step (``num_envs`` environments at once):
 4. After warm-up: ``updates_per_step`` low-level updates per environment step and
    ``meta_updates_per_transition`` meta updates (1 by default) per meta transition, with importance weights and
    new priorities from the TD errors.
+5. The meta-only phase (the last ``meta_only_steps`` of the run, off by default): the low level and the observation
+   normaliser stop learning, the low level flies its mean action (as an exported policy does), the meta replay
+   buffer starts empty and only the meta-controller learns, with its own entropy target
+   (``meta_only_entropy_scale``), against the low level it will fly with.
 
 Checkpoints (every ``checkpoint_every`` steps and at the end) hold everything needed to continue exactly:
 networks, optimisers, temperatures, replay buffers, the observation normaliser, the environments' state and
@@ -53,7 +57,7 @@ from policies.vector_env import SarSearchVectorEnv
 CHECKPOINT = "checkpoint.pt"
 LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
               "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
-              "meta_entropy", "steps_per_s")
+              "meta_entropy", "eval_success_rate", "steps_per_s")
 WINDOW = 100  # episodes in the rolling statistics
 
 
@@ -85,10 +89,7 @@ class Trainer:
         self.meta = self.meta_buffer = None
         if self.hrl:
             self.meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), cfg, seed=cfg.seed + 1)
-            self.meta_buffer = PrioritizedReplayBuffer(cfg.meta_buffer_size, {
-                "obs": ((META_OBS_DIM,), np.float32), "action": ((), np.int64), "reward": ((), np.float32),
-                "next_obs": ((META_OBS_DIM,), np.float32), "done": ((), np.float32),
-                "discount": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed + 1)
+            self.meta_buffer = self._new_meta_buffer()
         n = cfg.num_envs
         self.step = 0  # environment steps so far (summed over environments)
         self.update_budget = 0.0
@@ -102,6 +103,7 @@ class Trainer:
         self.recent: deque = deque(maxlen=WINDOW)  # (success, return, length, coverage) of finished episodes
         self.recent_subgoals: deque = deque(maxlen=10 * WINDOW)  # 1 if a sub-goal point was reached in time
         self.metrics: dict[str, float] = {}
+        self.best_meta: dict | None = None  # meta_keep_best: {"success", "step", "actor"} of the best evaluation
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if resume:
             self._load(self.run_dir / CHECKPOINT)
@@ -110,6 +112,19 @@ class Trainer:
             self.obs, _ = self.env.reset(seed=[int(s) for s in seeds])
             (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
         self._writer = None
+
+    def _new_meta_buffer(self) -> PrioritizedReplayBuffer:
+        cfg = self.config
+        return PrioritizedReplayBuffer(cfg.meta_buffer_size, {
+            "obs": ((META_OBS_DIM,), np.float32), "action": ((), np.int64), "reward": ((), np.float32),
+            "next_obs": ((META_OBS_DIM,), np.float32), "done": ((), np.float32),
+            "discount": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed + 1)
+
+    @property
+    def low_level_frozen(self) -> bool:
+        """True in the meta-only phase (``TrainConfig.meta_only_steps``): the low level and the normaliser are
+        fixed and the low level flies its mean action. Never for flat SAC."""
+        return self.hrl and self.step >= self.config.meta_only_from
 
     # ------------------------------------------------------------------ acting
     def _norm(self, obs: np.ndarray) -> np.ndarray:
@@ -137,12 +152,17 @@ class Trainer:
     def collect(self) -> int:
         """One vector step of experience; returns the number of meta transitions it completed."""
         cfg = self.config
+        frozen = self.low_level_frozen
+        if frozen:
+            if self.step < cfg.meta_only_from + cfg.num_envs:  # the first vector step of the phase
+                self.meta_buffer = self._new_meta_buffer()
+            self.meta.target_entropy = cfg.meta_only_entropy_scale * math.log(len(GOAL_NAMES))
         if self.hrl:
             self._choose_goals()
         if self.step < cfg.warmup_steps:
             actions = self.rng.uniform(ACTION_LOW, ACTION_HIGH, size=(cfg.num_envs, 4)).astype(np.float32)
         else:
-            actions = self.low.act(self._norm(self.obs)).astype(np.float32)
+            actions = self.low.act(self._norm(self.obs), deterministic=frozen).astype(np.float32)
         core = self.env.core
         distance_before = np.hypot(*(core.position - core.goal_point).T)
         covered_before = core.covered_cells.copy()
@@ -167,9 +187,10 @@ class Trainer:
             self.segment_reached |= reached
         else:
             low_reward = reward
-        self.low_buffer.add(obs=self.obs, action=actions, reward=low_reward.astype(np.float32), next_obs=real_next,
-                            done=terminated.astype(np.float32))
-        self.normalizer.update(self.obs)
+        if not frozen:
+            self.low_buffer.add(obs=self.obs, action=actions, reward=low_reward.astype(np.float32),
+                                next_obs=real_next, done=terminated.astype(np.float32))
+            self.normalizer.update(self.obs)
         completed = 0
         if self.hrl:
             self.segment_return += cfg.meta_gamma ** self.segment_steps * reward
@@ -197,8 +218,11 @@ class Trainer:
         cfg = self.config
         if self.step < cfg.warmup_steps or len(self.low_buffer) < cfg.batch_size:
             return
-        beta = linear_beta(self.step, cfg.total_steps, cfg.per_beta_start)
-        self.update_budget += cfg.updates_per_step * cfg.num_envs
+        # annealed to 1 over the steps in which the low level learns, so that a run with a meta-only phase
+        # trains exactly as one without it until the phase starts
+        beta = linear_beta(self.step, cfg.meta_only_from, cfg.per_beta_start)
+        if not self.low_level_frozen:
+            self.update_budget += cfg.updates_per_step * cfg.num_envs
         while self.update_budget >= 1.0:
             self.update_budget -= 1.0
             batch, indices, weights = self.low_buffer.sample(cfg.batch_size, beta)
@@ -246,12 +270,16 @@ class Trainer:
         started, started_step = time.perf_counter(), self.step
         last_log = self.step // cfg.log_every
         last_checkpoint = self.step // cfg.checkpoint_every
+        last_eval = self.step // cfg.eval_every if cfg.eval_every else 0
         with open(csv_path, "a", newline="") as handle:
             writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
             if new_csv:
                 writer.writeheader()
             while self.step < end:
                 self.learn(self.collect())
+                if cfg.eval_every and self.step // cfg.eval_every > last_eval:
+                    last_eval = self.step // cfg.eval_every
+                    self.quick_evaluation()
                 if self.step // cfg.log_every > last_log:
                     last_log = self.step // cfg.log_every
                     row = self._log_row(started, started_step)
@@ -263,12 +291,37 @@ class Trainer:
                 if self.step // cfg.checkpoint_every > last_checkpoint:
                     last_checkpoint = self.step // cfg.checkpoint_every
                     self.save()
+        if self.step >= cfg.total_steps and self.best_meta is not None:
+            self.meta.actor.load_state_dict(self.best_meta["actor"])  # meta_keep_best: the run ends with it
         path = self.save()
         if progress:
             print(file=sys.stderr)
+            if self.best_meta is not None and self.step >= cfg.total_steps:
+                print(f"kept the meta-controller of step {self.best_meta['step']:,} (val success "
+                      f"{self.best_meta['success']:.1%} on {cfg.eval_episodes} episodes)", file=sys.stderr)
         if self._writer is not None:
             self._writer.close()
         return path
+
+    def quick_evaluation(self) -> float:
+        """Success rate of the deterministic policy as it stands on the first ``eval_episodes`` val scenarios
+        (logged as ``eval_success_rate``); with ``meta_keep_best``, in the meta-only phase, remembers the
+        meta-controller of the best one. Uses no random generator of the run (deterministic actions, its own
+        environments), so training goes on exactly as without it."""
+        from policies.checkpoint_policy import CheckpointPolicy  # it imports this module
+        from policies.evaluation import episode_batch
+        from policies.parallel_evaluation import fly_policy
+
+        cfg = self.config
+        policy = CheckpointPolicy(cfg, self.normalizer, self.low, self.meta, self.step, self.run_dir)
+        record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=self.hrl))
+        success = float(record["success"].mean())
+        self.metrics["eval_success_rate"] = success
+        if cfg.meta_keep_best and self.low_level_frozen and (self.best_meta is None
+                                                              or success > self.best_meta["success"]):
+            actor = {key: value.clone() for key, value in self.meta.actor.state_dict().items()}
+            self.best_meta = {"success": success, "step": self.step, "actor": actor}
+        return success
 
     def _log_row(self, started: float, started_step: int) -> dict:
         recent = np.array(self.recent) if self.recent else np.zeros((0, 4))
@@ -281,7 +334,7 @@ class Trainer:
                 "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
                 "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
                 "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
-                "steps_per_s": (self.step - started_step) / elapsed}
+                "eval_success_rate": m.get("eval_success_rate", math.nan), "steps_per_s": (self.step - started_step) / elapsed}
 
     def _tensorboard(self, row: dict) -> None:
         try:
@@ -300,7 +353,8 @@ class Trainer:
         done = self.step / end
         bar = "#" * int(30 * done) + "." * (30 - int(30 * done))
         line = (f"[{bar}] {self.step:,}/{end:,} steps  {row['steps_per_s']:,.0f}/s  episodes {row['episodes']}  "
-                f"success {row['success_rate']:.0%}  return {row['mean_return']:.1f}")
+                f"success {row['success_rate']:.0%}  return {row['mean_return']:.1f}"
+                + ("" if math.isnan(row["eval_success_rate"]) else f"  val success {row['eval_success_rate']:.0%}"))
         print(("\r" + line) if sys.stderr.isatty() else line, end="" if sys.stderr.isatty() else "\n",
               file=sys.stderr, flush=True)
 
@@ -317,6 +371,7 @@ class Trainer:
                         self.segment_steps.copy(), self.segment_reached.copy()],
             "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(), "episodes": self.episodes,
             "recent": list(self.recent), "recent_subgoals": list(self.recent_subgoals), "metrics": dict(self.metrics),
+            "best_meta": self.best_meta,
         }
 
     def save(self) -> Path:
@@ -347,6 +402,7 @@ class Trainer:
         self.recent.extend(state["recent"])
         self.recent_subgoals.extend(state["recent_subgoals"])
         self.metrics = dict(state["metrics"])
+        self.best_meta = state.get("best_meta")  # checkpoints from before meta_keep_best have none
         self._truncate_csv(self.step)
 
     def _truncate_csv(self, step: int) -> None:

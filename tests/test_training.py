@@ -240,7 +240,7 @@ def test_the_goal_bonus_pays_for_a_searched_cell_not_for_hovering_at_it(tmp_path
     trainer.meta.act = lambda obs: np.full(len(obs), SEARCH_LOCATION)
     sensor = {"intensity": 0.0}
 
-    def fly_to_goal(obs):
+    def fly_to_goal(obs, deterministic=False):
         core = trainer.env.core
         velocity = (core.goal_point - core.position) / config.flight.max_speed_mps
         velocity /= np.maximum(1.0, np.linalg.norm(velocity, axis=1, keepdims=True))
@@ -263,3 +263,95 @@ def test_the_goal_bonus_pays_for_a_searched_cell_not_for_hovering_at_it(tmp_path
     reward = trainer.low_buffer.data["reward"][len(trainer.low_buffer) - 2:len(trainer.low_buffer)]
     assert np.all(np.hypot(*(trainer.env.core.goal_point - point_before).T) > radius)  # the search moved on
     assert np.all(reward > 4.0)  # the bonus, paid for completing the sub-goal
+
+
+def test_the_meta_only_phase_freezes_the_low_level_and_starts_the_meta_buffer_afresh(tmp_path):
+    config = small_config("hrl-sac", total_steps=1_200, meta_only_steps=600, meta_only_entropy_scale=0.25)
+    assert config.meta_only_from == 600
+    trainer = Trainer(config, tmp_path / "run")
+    trainer.run(progress=False, stop_at=600)
+    assert len(trainer.meta_buffer) > 50  # the joint phase's meta transitions, still there before the phase's first step
+    actor = {k: v.clone() for k, v in trainer.low.actor.state_dict().items()}
+    critic = {k: v.clone() for k, v in trainer.low.critic.state_dict().items()}
+    meta_actor = {k: v.clone() for k, v in trainer.meta.actor.state_dict().items()}
+    normaliser, low_buffered, low_updates = trainer.normalizer.state_dict(), len(trainer.low_buffer), \
+        trainer.low.num_updates
+    assert trainer.low_level_frozen
+    trainer.collect()  # the first step of the phase drops them
+    assert len(trainer.meta_buffer) <= 2
+    trainer.run(progress=False)
+    assert trainer.step == 1_200 and trainer.low.num_updates == low_updates
+    assert all(torch.equal(actor[k], v) for k, v in trainer.low.actor.state_dict().items())
+    assert all(torch.equal(critic[k], v) for k, v in trainer.low.critic.state_dict().items())
+    assert not all(torch.equal(meta_actor[k], v) for k, v in trainer.meta.actor.state_dict().items())
+    assert len(trainer.low_buffer) == low_buffered
+    np.testing.assert_array_equal(trainer.normalizer.state_dict()["mean"], normaliser["mean"])
+    # 600 steps on 2 environments, one meta transition per K = 10 steps or finished episode
+    assert 600 / 10 <= len(trainer.meta_buffer) <= 600 / 10 + 20
+    assert trainer.meta.target_entropy == pytest.approx(0.25 * np.log(4))
+
+
+def test_the_meta_only_phase_resumes_exactly(tmp_path):
+    config = small_config("hrl-sac", total_steps=1_200, meta_only_steps=600, checkpoint_every=400,
+                          meta_keep_best=True, eval_every=200, eval_episodes=4)
+    uninterrupted = Trainer(config, tmp_path / "a")
+    uninterrupted.run(progress=False)
+    killed = Trainer(config, tmp_path / "b")
+    killed.run(progress=False, stop_at=800)  # killed inside the phase, after the checkpoint at step 800
+    resumed = Trainer(config, tmp_path / "b", resume=True)
+    assert resumed.step == 800 and resumed.low_level_frozen
+    resumed.run(progress=False)
+    for a, b in zip(uninterrupted.meta.critic.state_dict().values(), resumed.meta.critic.state_dict().values()):
+        assert torch.equal(a, b)
+    for a, b in zip(uninterrupted.meta.actor.state_dict().values(), resumed.meta.actor.state_dict().values()):
+        assert torch.equal(a, b)
+    assert uninterrupted.best_meta["step"] == resumed.best_meta["step"]
+    assert log_rows(tmp_path / "a" / "progress.csv") == log_rows(tmp_path / "b" / "progress.csv")
+
+
+def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
+    plain = Trainer(small_config("hrl-sac", eval_every=0), tmp_path / "plain")
+    plain.run(progress=False)
+    evaluated = Trainer(small_config("hrl-sac", eval_every=200, eval_episodes=4), tmp_path / "evaluated")
+    evaluated.run(progress=False)
+    for a, b in zip(plain.low.actor.state_dict().values(), evaluated.low.actor.state_dict().values()):
+        assert torch.equal(a, b)
+    for a, b in zip(plain.meta.actor.state_dict().values(), evaluated.meta.actor.state_dict().values()):
+        assert torch.equal(a, b)
+    rows_plain, rows_evaluated = log_rows(tmp_path / "plain" / "progress.csv"), \
+        log_rows(tmp_path / "evaluated" / "progress.csv")
+    assert [row["eval_success_rate"] for row in rows_plain] == ["nan"] * len(rows_plain)
+    evaluations = [row.pop("eval_success_rate") for row in rows_evaluated]
+    assert evaluations[0] == "nan" and all(0.0 <= float(value) <= 1.0 for value in evaluations[1:])
+    assert [{k: v for k, v in row.items() if k != "eval_success_rate"} for row in rows_plain] == rows_evaluated
+    # the last evaluation is the final policy's success on the first 4 val scenarios, as hrlsac evaluate gives it
+    final = evaluate_checkpoint(tmp_path / "evaluated", split="val", episodes=4)
+    assert float(evaluations[-1]) == final["success_rate"]
+
+
+def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path):
+    config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True,
+                          eval_every=100, eval_episodes=8)
+    trainer = Trainer(config, tmp_path)
+    scores = []
+    evaluate = trainer.quick_evaluation
+    trainer.quick_evaluation = lambda: scores.append((trainer.step, evaluate())) or scores[-1][1]
+    trainer.run(progress=False)
+    in_phase = [(step, score) for step, score in scores if step >= config.meta_only_from]
+    assert in_phase[0][0] == 600 and len(in_phase) == 11
+    best_step, best_score = max(in_phase, key=lambda item: (item[1], -item[0]))  # the first of the best
+    assert trainer.best_meta["step"] == best_step and trainer.best_meta["success"] == best_score
+    assert evaluate() == best_score  # the run ended with that meta-controller
+    policy = CheckpointPolicy.load(tmp_path)  # and so does its checkpoint
+    for a, b in zip(policy.meta.actor.state_dict().values(), trainer.best_meta["actor"].values()):
+        assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize("overrides, problem", [
+    ({"meta_only_steps": 1_000}, "must be below total_steps"), ({"meta_only_steps": -1}, "must be an integer"),
+    ({"meta_keep_best": True, "eval_every": 100}, "needs a meta-only phase and quick evaluations"),
+    ({"meta_keep_best": True, "meta_only_steps": 500}, "needs a meta-only phase and quick evaluations"),
+    ({"eval_episodes": 0}, "eval_episodes must be an integer")])
+def test_meta_only_options_are_validated(overrides, problem):
+    with pytest.raises(ValueError, match=problem):
+        small_config("hrl-sac", total_steps=1_000, **overrides)
