@@ -202,7 +202,8 @@ class TrainConfig:
     ``eval_episodes`` scenarios of the val split; the success rate is logged (``eval_success_rate``). They use
     no random generator of the run, so they do not change its training. 0 = never."""
     eval_episodes: int = 32
-    """Episodes per quick evaluation (500 take about 10 s here)."""
+    """Episodes per quick evaluation (500 take about 8 s here with a trained HRL-SAC policy: 7.3 and 7.8 s
+    measured)."""
     meta_keep_best: bool = False
     """HRL-SAC with a meta-only phase: the run ends with the meta-controller (its actor, the part that acts) of the
     quick evaluation with the highest val success within the phase, counting the one at its first step (the

@@ -334,7 +334,8 @@ class Trainer:
                 "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
                 "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
                 "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
-                "eval_success_rate": m.get("eval_success_rate", math.nan), "steps_per_s": (self.step - started_step) / elapsed}
+                "eval_success_rate": m.get("eval_success_rate", math.nan),
+                "steps_per_s": (self.step - started_step) / elapsed}
 
     def _tensorboard(self, row: dict) -> None:
         try:

@@ -270,7 +270,7 @@ def test_the_meta_only_phase_freezes_the_low_level_and_starts_the_meta_buffer_af
     assert config.meta_only_from == 600
     trainer = Trainer(config, tmp_path / "run")
     trainer.run(progress=False, stop_at=600)
-    assert len(trainer.meta_buffer) > 50  # the joint phase's meta transitions, still there before the phase's first step
+    assert len(trainer.meta_buffer) > 50  # the joint phase's meta transitions, there until the phase's first step
     actor = {k: v.clone() for k, v in trainer.low.actor.state_dict().items()}
     critic = {k: v.clone() for k, v in trainer.low.critic.state_dict().items()}
     meta_actor = {k: v.clone() for k, v in trainer.meta.actor.state_dict().items()}
@@ -329,22 +329,28 @@ def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
     assert float(evaluations[-1]) == final["success_rate"]
 
 
-def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path):
+def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path, monkeypatch):
+    """The evaluations' scores are scripted (a real small run scores 0 everywhere, which would not tell the best
+    apart): the joint phase's evaluation at step 500 scores highest but is not a candidate; in the phase, step
+    1,100 is the best and step 1,400 only ties with it, so the run must end with step 1,100's meta-controller."""
     config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True,
-                          eval_every=100, eval_episodes=8)
+                          eval_every=100, eval_episodes=4)
     trainer = Trainer(config, tmp_path)
-    scores = []
-    evaluate = trainer.quick_evaluation
-    trainer.quick_evaluation = lambda: scores.append((trainer.step, evaluate())) or scores[-1][1]
+    scripted = {500: 1.0, 1_100: 0.75, 1_400: 0.75}
+    actors = {}
+
+    def fake_flight(policy, core):
+        actors[trainer.step] = {k: v.clone() for k, v in policy.meta.actor.state_dict().items()}
+        return {"success": np.full(core.n, scripted.get(trainer.step, 0.25) >= np.linspace(0.1, 0.9, core.n))}
+
+    monkeypatch.setattr("policies.parallel_evaluation.fly_policy", fake_flight)
     trainer.run(progress=False)
-    in_phase = [(step, score) for step, score in scores if step >= config.meta_only_from]
-    assert in_phase[0][0] == 600 and len(in_phase) == 11
-    best_step, best_score = max(in_phase, key=lambda item: (item[1], -item[0]))  # the first of the best
-    assert trainer.best_meta["step"] == best_step and trainer.best_meta["success"] == best_score
-    assert evaluate() == best_score  # the run ended with that meta-controller
-    policy = CheckpointPolicy.load(tmp_path)  # and so does its checkpoint
-    for a, b in zip(policy.meta.actor.state_dict().values(), trainer.best_meta["actor"].values()):
-        assert torch.equal(a, b)
+    assert sorted(actors) == list(range(100, 1_700, 100))
+    assert trainer.best_meta["step"] == 1_100 and trainer.best_meta["success"] == 0.75
+    assert not all(torch.equal(actors[1_100][k], actors[1_600][k]) for k in actors[1_100])  # the phase learned
+    policy = CheckpointPolicy.load(tmp_path)  # the run, and its checkpoint, end with step 1,100's
+    for actor in (trainer.meta.actor.state_dict(), policy.meta.actor.state_dict()):
+        assert all(torch.equal(actor[k], actors[1_100][k]) for k in actor)
 
 
 @pytest.mark.parametrize("overrides, problem", [
