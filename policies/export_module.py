@@ -58,12 +58,14 @@ class ActionHead(nn.Module):
         self.normalize = FrozenNormalizer(normalizer, actor.obs_dim)
         self.trunk = without_dropout(actor.trunk)
         self.mean = copy.deepcopy(actor.mean)  # the log-std head plays no part in the deterministic action
+        self.register_buffer("policy_low", torch.from_numpy(scaler.policy_low.copy()))
+        self.register_buffer("half_range", torch.from_numpy(scaler.half_range))
         self.register_buffer("low", torch.from_numpy(scaler.low.copy()))
-        self.register_buffer("half_range", torch.from_numpy((scaler.high - scaler.low) / 2.0))
+        self.register_buffer("high", torch.from_numpy(scaler.high.copy()))
 
     def forward(self, obs: Tensor) -> Tensor:
         unit = torch.tanh(self.mean(self.trunk(self.normalize(obs))))  # SquashedGaussianActor.deterministic
-        return self.low + (unit + 1.0) * self.half_range  # ActionScaler.to_env
+        return torch.clamp(self.policy_low + (unit + 1.0) * self.half_range, self.low, self.high)  # ActionScaler.to_env
 
 
 class GoalHead(nn.Module):

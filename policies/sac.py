@@ -62,7 +62,7 @@ class SAC(CheckpointedAgent):
                  config: TrainConfig, seed: int = 0, input_mask: np.ndarray | None = None):
         self.config = config
         self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
-        self.scaler = ActionScaler(action_low, action_high)
+        self.scaler = ActionScaler(action_low, action_high, config.action_margin)
         if self.scaler.dim != self.act_dim:
             raise ValueError(f"action bounds have {self.scaler.dim} dimensions, act_dim is {self.act_dim}")
         self.gamma, self.tau = float(config.sac_gamma), float(config.tau)
@@ -132,7 +132,7 @@ class SAC(CheckpointedAgent):
                       discount: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
         """y = r + discount (1 - done) (min_j Q'_j(s', a') - alpha log pi(a'|s')), a' ~ pi(.|s'); shape (B,)."""
         next_action, next_log_prob = self.actor.sample(next_obs, self.generator)
-        q1_next, q2_next = self.critic_target(next_obs, next_action)
+        q1_next, q2_next = self.critic_target(next_obs, self.scaler.flown(next_action))
         soft_value = torch.min(q1_next, q2_next) - alpha * next_log_prob
         return reward + discount * (1.0 - done) * soft_value
 
@@ -173,7 +173,7 @@ class SAC(CheckpointedAgent):
             with self._precision():
                 new_action, log_prob = self.actor.sample(obs, self.generator)
                 self._set_critic_requires_grad(False)
-                q1_pi, q2_pi = self.critic(obs, new_action)
+                q1_pi, q2_pi = self.critic(obs, self.scaler.flown(new_action))
                 self._set_critic_requires_grad(True)
             actor_loss = (alpha * log_prob - torch.min(q1_pi, q2_pi)).mean()
 

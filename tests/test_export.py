@@ -39,14 +39,15 @@ NET = NetworkConfig(hidden=(32, 32), head=16, dropout=0.1)
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, Path]:
-    """A few hundred training steps of each algorithm (parity needs a checkpoint, not a good policy)."""
+    """A few hundred training steps of each algorithm (parity needs a checkpoint, not a good policy); flat SAC's
+    with an action margin, so that its artifact must clip as the eager policy does."""
     out = {}
     for algo in ALGOS:
         config = TrainConfig.from_preset(
             "default", algo=algo, seed=1, total_steps=400, num_envs=2, warmup_steps=100, batch_size=32,
             meta_batch_size=8, buffer_size=2_000, meta_buffer_size=500, checkpoint_every=10**6, log_every=10**6,
             eval_every=0, actor=NET, critic=NET, meta_actor=NET, meta_critic=NET,
-            flight=FlightSettings(max_steps=120, subgoal_interval=K))
+            flight=FlightSettings(max_steps=120, subgoal_interval=K), action_margin=0.25 if algo == "sac" else 0.0)
         out[algo] = tmp_path_factory.mktemp(algo)
         Trainer(config, out[algo]).run(progress=False)
     return out
@@ -88,6 +89,21 @@ def test_artifact_acts_like_the_eager_policy_on_recorded_observations(runs, arti
         assert np.array_equal(goals, policy.choose_goals(obs[:, :META_OBS_DIM]))
     else:
         assert (goals == -1).all()
+
+
+def test_artifact_module_clips_to_the_action_ranges_under_an_action_margin(runs):
+    policy = CheckpointPolicy.load(runs["sac"])  # trained with action_margin 0.25: movement [-1.5, 1.5], others
+    assert policy.config.action_margin == 0.25   # [-0.25, 1.25], clipped to the environment's ranges
+    mean_head = policy.low.actor.mean
+    with torch.no_grad():  # the same pre-tanh mean for every observation
+        mean_head.weight.zero_()
+        mean_head.bias.copy_(torch.tensor([1.2, -2.0, 0.5, -0.3]))
+    unit = np.tanh([1.2, -2.0, 0.5, -0.3])
+    expected = np.array([1.0, -1.0, 0.5 + 0.75 * unit[2], 0.5 + 0.75 * unit[3]], dtype=np.float32)
+    obs = np.random.default_rng(0).standard_normal((5, OBS_DIM)).astype(np.float32)
+    np.testing.assert_allclose(policy.act(obs), np.tile(expected, (5, 1)), rtol=1e-6)
+    module_actions = policy_module(policy).act(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(module_actions, policy.act(obs), rtol=1e-6)
 
 
 @pytest.mark.parametrize("fmt", FORMATS)

@@ -207,6 +207,52 @@ def test_action_scaler_round_trip_and_ranges():
 
 
 # ---------------------------------------------------------------------------------------------------- targets
+def test_action_margin_widens_the_policy_range_and_clips_to_the_environment():
+    scaler = ActionScaler(ENV_LOW, ENV_HIGH, margin=0.25)  # movement [-1.5, 1.5], intensity / zoom [-0.25, 1.25]
+    np.testing.assert_allclose(scaler.to_env(np.zeros(4)), [0.0, 0.0, 0.5, 0.5])  # the same centre
+    np.testing.assert_allclose(scaler.to_env(np.full(4, 0.4)), [0.6, 0.6, 0.8, 0.8], rtol=1e-6)
+    np.testing.assert_allclose(scaler.to_env(np.full(4, 2 / 3)), ENV_HIGH, rtol=1e-6)  # the bound short of tanh's 1
+    np.testing.assert_allclose(scaler.to_env(np.full(4, 0.9)), ENV_HIGH)  # beyond: clipped
+    np.testing.assert_allclose(scaler.to_env(-np.ones(4)), ENV_LOW)
+    np.testing.assert_allclose(scaler.to_unit(ENV_HIGH), np.full(4, 2 / 3), rtol=1e-6)
+    unit = torch.tensor([[0.9, -0.95, 0.3, -0.5]], requires_grad=True)
+    flown = scaler.flown(unit)
+    torch.testing.assert_close(flown, torch.tensor([[2 / 3, -2 / 3, 0.3, -0.5]]))
+    flown.sum().backward()  # the critics' gradient reaches the policy only inside the environment's range
+    torch.testing.assert_close(unit.grad, torch.tensor([[0.0, 0.0, 1.0, 1.0]]))
+    plain = torch.tensor([[0.9, -0.95, 0.3, -0.5]])
+    assert ActionScaler(ENV_LOW, ENV_HIGH).flown(plain) is plain  # no margin: the action as it is
+    with pytest.raises(ValueError, match="action margin must be a finite number >= 0, got -0.1"):
+        ActionScaler(ENV_LOW, ENV_HIGH, margin=-0.1)
+    with pytest.raises(ValueError, match=r"TrainConfig.action_margin must be in \[0, 1\], got 1.5"):
+        small_config(action_margin=1.5)
+
+
+def test_critics_judge_the_flown_action_under_an_action_margin(monkeypatch):
+    agent = SAC(3, 2, LOW2, HIGH2, small_config(action_margin=0.25))  # second dimension [0, 1] -> [-0.25, 1.25]
+    seen = []
+    for critic in (agent.critic, agent.critic_target):
+        forward = critic.forward
+        monkeypatch.setattr(critic, "forward", lambda obs, action, forward=forward: (seen.append(action.detach()),
+                                                                                     forward(obs, action))[1])
+    sampled = torch.tensor([[0.9, -0.95], [0.3, 0.5]])
+
+    def fake_sample(obs, generator=None):
+        mean, log_std = agent.actor(obs)
+        return sampled + 0.0 * mean, 0.0 * log_std.sum(-1)
+
+    monkeypatch.setattr(agent.actor, "sample", fake_sample)
+    batch = continuous_batch(np.random.default_rng(0), 2)
+    agent.update(batch)
+    expected = torch.tensor([[2 / 3, -2 / 3], [0.3, 0.5]])
+    target_action, buffer_action, policy_action = seen  # soft target, the critics on the batch, the actor step
+    torch.testing.assert_close(target_action, expected)
+    torch.testing.assert_close(policy_action, expected)
+    torch.testing.assert_close(buffer_action, agent.scaler.to_unit(torch.from_numpy(batch["action"])))
+    actions = agent.act(np.zeros((1, 3), np.float32), deterministic=True)
+    assert np.all(actions >= LOW2) and np.all(actions <= HIGH2)
+
+
 def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
     agent = SAC(3, 2, LOW2, HIGH2, small_config(initial_alpha=0.5))
     constant_output(agent.critic_target.q1, 4.0)
