@@ -1,6 +1,7 @@
 """Shared fixtures: free UDP ports and a simulated vehicle served over real UDP."""
 from __future__ import annotations
 
+import itertools
 import os
 import socket
 
@@ -18,16 +19,33 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 import pytest  # noqa: E402
 
 
+PORT_RANGE = (20_000, 60_000)
+"""UDP ports the tests take theirs from, split between the pytest-xdist workers."""
+_ports_handed_out = itertools.count()
+
+
 def free_udp_ports(count: int) -> list[int]:
-    """Ports that were free a moment ago (bound to port 0 by the OS, then released)."""
-    sockets = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(count)]
-    try:
-        for sock in sockets:
-            sock.bind(("127.0.0.1", 0))
-        return [sock.getsockname()[1] for sock in sockets]
-    finally:
-        for sock in sockets:
-            sock.close()
+    """Ports free right now, from this pytest-xdist worker's own share of ``PORT_RANGE``.
+
+    Asking the OS for a free port (bind to port 0, release) leaves a moment in which another worker can be handed
+    the same one before either test binds it; with a share per worker that cannot happen, and within a worker the
+    ports go round the share, so a port comes back only after all the others."""
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    share = (PORT_RANGE[1] - PORT_RANGE[0]) // max(workers, 1)
+    first = PORT_RANGE[0] + worker * share
+    ports: list[int] = []
+    for _ in range(share):
+        port = first + next(_ports_handed_out) % share
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:  # in use by something else on the machine: the next one
+                continue
+        ports.append(port)
+        if len(ports) == count:
+            return ports
+    raise RuntimeError(f"no {count} free UDP ports in {first}-{first + share - 1}")
 
 
 @pytest.fixture
