@@ -48,6 +48,8 @@ HAZARD_MARGIN_M = 20.0
 that turns once within reach of a waypoint still clears the zone)."""
 EXIT_MARGIN_M = 10.0
 """A drone already inside a zone's margin is first sent this far beyond it, straight away from the centre."""
+OUTSIDE_FENCE_COST = 1e9
+"""Added to the length of a detour whose waypoint lies beyond the fence margin: the other side is taken."""
 
 
 def cell_centres(area: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,7 +110,8 @@ def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.
     from the drone to the inflated circle, one inflated radius beyond the tangent point. Reaching it grounds the
     goal again (``SearchState.advance``), and so routes it again: several zones are passed one at a time. A drone
     inside an inflated zone, with the zone ahead, leaves it radially first.
-    Waypoints are kept ``FENCE_MARGIN_M`` inside the search area."""
+    Waypoints are kept ``FENCE_MARGIN_M`` inside the search area: a zone near the fence is passed on the side
+    away from it, even when the way round the fence's side would be shorter."""
     out = point.astype(np.float64, copy=True)
     centre, radius = obstacles[:, :, :2], obstacles[:, :, 2] + HAZARD_MARGIN_M
     for k in range(obstacles.shape[1]):  # a point inside an inflated zone: onto its rim
@@ -133,6 +136,7 @@ def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.
     d = np.maximum(np.hypot(*from_centre.T), 1e-9)
     base = np.arctan2(from_centre[:, 1], from_centre[:, 0])
     half_angle = np.arccos(np.minimum(r / d, 1.0))
+    inner = area[rows] + np.array([FENCE_MARGIN_M, -FENCE_MARGIN_M, FENCE_MARGIN_M, -FENCE_MARGIN_M])
     best, best_cost = None, None
     for side in (1.0, -1.0):  # the two tangents; keep the one with the shorter way to the point
         angle = base + side * half_angle
@@ -141,13 +145,18 @@ def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.
         heading /= np.maximum(np.hypot(*heading.T), 1e-9)[:, None]
         waypoint = touch + heading * r[:, None]
         cost = np.hypot(*(waypoint - p).T) + np.hypot(*(out[rows] - waypoint).T)
+        # A waypoint beyond the fence margin would be pulled inside below, and the leg to it then crosses the zone:
+        # the side that fits inside wins, whatever its length (when neither fits, the shorter way still does).
+        outside = ((waypoint[:, 0] < inner[:, 0]) | (waypoint[:, 0] > inner[:, 1])
+                   | (waypoint[:, 1] < inner[:, 2]) | (waypoint[:, 1] > inner[:, 3]))
+        cost = cost + OUTSIDE_FENCE_COST * outside
         best = waypoint if best is None else np.where((cost < best_cost)[:, None], waypoint, best)
         best_cost = cost if best_cost is None else np.minimum(cost, best_cost)
     inside_margin = d <= r
     best[inside_margin] = c[inside_margin] + (from_centre[inside_margin] / d[inside_margin, None]) \
         * (r[inside_margin] + EXIT_MARGIN_M)[:, None]
-    best[:, 0] = np.clip(best[:, 0], area[rows, 0] + FENCE_MARGIN_M, area[rows, 1] - FENCE_MARGIN_M)
-    best[:, 1] = np.clip(best[:, 1], area[rows, 2] + FENCE_MARGIN_M, area[rows, 3] - FENCE_MARGIN_M)
+    best[:, 0] = np.clip(best[:, 0], inner[:, 0], inner[:, 1])
+    best[:, 1] = np.clip(best[:, 1], inner[:, 2], inner[:, 3])
     out[rows] = best
     return out
 

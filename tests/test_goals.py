@@ -127,6 +127,18 @@ def test_a_straight_flier_following_the_routed_points_reaches_the_point_and_neve
         assert np.hypot(*(goal - position)) <= 15.0, end
 
 
+def test_a_zone_by_the_fence_is_passed_on_the_side_away_from_it():
+    from missions.goals import FENCE_MARGIN_M
+
+    zone = np.array([[[300.0, 460.0, 40.0]]])  # 40 m from the east edge (500): no way round inside the margin there
+    for start, end in (((0.0, 465.0), (600.0, 480.0)), ((0.0, 480.0), (600.0, 470.0)), ((600.0, 470.0), (0.0, 490.0))):
+        waypoint = route(start, end, zones=zone)
+        assert waypoint[1] < 460.0 - 40.0, (start, end, waypoint)  # west of the zone, where the shorter way is east
+        assert clearance(start, waypoint, zone[0, 0]) >= HAZARD_MARGIN_M - 1e-6
+        assert -500.0 + FENCE_MARGIN_M <= waypoint[1] <= 500.0 - FENCE_MARGIN_M
+        assert -50.0 + FENCE_MARGIN_M <= waypoint[0] <= 950.0 - FENCE_MARGIN_M
+
+
 def test_a_point_inside_a_zone_moves_to_its_rim_and_a_drone_inside_the_margin_leaves_it_first():
     rim = route((0.0, 0.0), (300.0, 10.0))  # inside the zone: onto the inflated rim, on the drone's side
     assert np.hypot(*(rim - ZONE[0, 0, :2])) >= 40.0 + HAZARD_MARGIN_M
