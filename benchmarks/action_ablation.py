@@ -18,7 +18,8 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
 scripted_low_level and track_object_goals tell the levels apart: which learned half loses the success.
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
-mean zoom, goal shares). A large gain from sampling, from forcing the sensor on or from full speed says the
+mean zoom, goal shares; HRL-SAC: how far the movement command points off the goal's point while the drone is
+farther than the reach radius, as a median and the share of steps more than 30 degrees off). A large gain from sampling, from forcing the sensor on or from full speed says the
 learned deterministic action, not the policy's knowledge of where to fly, is what fails (docs/results/README.md).
 
 Usage: python benchmarks/action_ablation.py RUN [--episodes 300] [--split test] [--out FILE]
@@ -121,7 +122,7 @@ def main() -> int:
         def act_on(batch, act=act, record=record):
             actions = act(batch)
             if record:
-                seen_actions.append((batch.steps.copy(), actions))
+                seen_actions.append((batch.steps.copy(), actions, batch.goal_point - batch.position))
             return actions
 
         def goals_for(meta_obs, choose_goals=choose_goals, record=record):
@@ -138,17 +139,27 @@ def main() -> int:
                                                        "detection_rate", "out_of_bounds_rate", "collision_rate")}
         low, high = metrics["success_ci95"]
         print(f"  {name:20s} success {metrics['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  coverage "
-              f"{metrics['coverage_mean']:.1%}  detection {metrics['detection_rate']:.1%}")
+              f"{metrics['coverage_mean']:.1%}  detection {metrics['detection_rate']:.1%}  collision "
+              f"{metrics['collision_rate']:.1%}  out of bounds {metrics['out_of_bounds_rate']:.1%}")
     # Every slot is stepped until the last episode ends: keep only the steps inside each slot's own episode.
-    actions = np.concatenate([a[steps < lengths] for steps, a in seen_actions])
+    actions = np.concatenate([a[steps < lengths] for steps, a, _ in seen_actions])
     behaviour = {"mean_movement_command": float(np.linalg.norm(actions[:, MOVEMENT], axis=1).mean()),
                  "sensor_on_share": float((actions[:, SEARCH_INTENSITY] >= SENSOR_ON_INTENSITY).mean()),
                  "mean_zoom": float(actions[:, CAMERA_ZOOM].mean())}
+    if policy.hierarchical:  # how straight the low level flies at its goal's point (while farther than the reach)
+        to_goal = np.concatenate([offset[steps < lengths] for steps, _, offset in seen_actions])
+        away = np.hypot(*to_goal.T) > policy.config.flight.reach_radius_m
+        error = np.degrees(np.abs(np.angle(np.exp(1j * (np.arctan2(actions[away, 1], actions[away, 0])
+                                                         - np.arctan2(to_goal[away, 1], to_goal[away, 0]))))))
+        behaviour.update(median_heading_error_deg=float(np.median(error)),
+                         heading_error_above_30_deg_share=float((error > 30.0).mean()))
     if seen_goals:
         chosen = np.concatenate(seen_goals)
         behaviour["goal_shares"] = {name: float(np.mean(chosen == i)) for i, name in enumerate(GOAL_NAMES)}
     print("  deterministic policy: mean movement command {mean_movement_command:.2f} of full speed, sensor on in "
           "{sensor_on_share:.0%} of steps, mean zoom {mean_zoom:.2f}".format(**behaviour)
+          + (", heading {median_heading_error_deg:.0f} deg off the goal's point (median; {heading_error_above_30_deg_share:.0%}"
+             " of steps more than 30 deg)".format(**behaviour) if policy.hierarchical else "")
           + ("; goals " + ", ".join(f"{k} {v:.0%}" for k, v in behaviour["goal_shares"].items()) if seen_goals else ""))
     write_report(args.out, {"run": args.run, "algo": policy.config.algo, "trained_steps": policy.step,
                             "split": args.split, "episodes": args.episodes, "variants": results,
