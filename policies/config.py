@@ -100,7 +100,8 @@ class TrainConfig:
     side; the environment's range clips it. 0 = tanh maps exactly onto the range (the paper). At 0.25 the
     policy reaches full speed, the sensor fully on or the widest zoom at tanh 0.67 instead of tanh's saturation,
     where the entropy term holds the mean away from the bound and the critic's gradient vanishes. The critics
-    judge the clipped (flown) action. The exported artifact applies the same map and clip."""
+    judge the clipped (flown) action. The exported artifact applies the same map and clip. Measured with
+    HRL-SAC over 3 seeds (comparison-v10 against v9): about +1 point on the val split, none on test (74.7 %)."""
     initial_alpha: float = 0.2
     """Initial entropy temperature of both levels."""
     low_level_ignores: tuple[str, ...] = ("coverage",)
