@@ -19,8 +19,9 @@ scripted_low_level and track_object_goals tell the levels apart: which learned h
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
 mean zoom, goal shares; HRL-SAC: how far the movement command points off the goal's point while the drone is
-farther than the reach radius, as a median and the share of steps more than 30 degrees off). A large gain from sampling, from forcing the sensor on or from full speed says the
-learned deterministic action, not the policy's knowledge of where to fly, is what fails (docs/results/README.md).
+farther than the reach radius, as a median and the share of steps more than 30 degrees off). A large gain
+from sampling, from forcing the sensor on or from full speed says the learned deterministic action, not the
+policy's knowledge of where to fly, is what fails (docs/results/README.md).
 
 Usage: python benchmarks/action_ablation.py RUN [--episodes 300] [--split test] [--out FILE]
 """
@@ -158,8 +159,9 @@ def main() -> int:
         behaviour["goal_shares"] = {name: float(np.mean(chosen == i)) for i, name in enumerate(GOAL_NAMES)}
     print("  deterministic policy: mean movement command {mean_movement_command:.2f} of full speed, sensor on in "
           "{sensor_on_share:.0%} of steps, mean zoom {mean_zoom:.2f}".format(**behaviour)
-          + (", heading {median_heading_error_deg:.0f} deg off the goal's point (median; {heading_error_above_30_deg_share:.0%}"
-             " of steps more than 30 deg)".format(**behaviour) if policy.hierarchical else "")
+          + (", heading {median_heading_error_deg:.0f} deg off the goal's point (median; "
+             "{heading_error_above_30_deg_share:.0%} of steps more than 30 deg)".format(**behaviour)
+             if policy.hierarchical else "")
           + ("; goals " + ", ".join(f"{k} {v:.0%}" for k, v in behaviour["goal_shares"].items()) if seen_goals else ""))
     write_report(args.out, {"run": args.run, "algo": policy.config.algo, "trained_steps": policy.step,
                             "split": args.split, "episodes": args.episodes, "variants": results,

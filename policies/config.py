@@ -154,7 +154,7 @@ class TrainConfig:
     meta-controller's K-step returns depend on a moving low level; this phase gives it a fixed one. Steps of
     this phase cost no low-level update, so they run several times faster. 0 = off. Measured (3 seeds, 500 test
     episodes; docs/results/README.md): 100,000 of 200,000 steps alone, 70.9 % against 70.8 % without
-    (comparison-v8); with ``meta_keep_best``, 74.7 % (the comparison)."""
+    (comparison-v8); with ``meta_keep_best``, 74.7 % (comparison-v9)."""
     meta_only_entropy_scale: float = 0.1
     """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
     that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
