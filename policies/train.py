@@ -7,7 +7,8 @@ Per vector step (``num_envs`` environments at once):
 2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
 3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
    ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
-   ``TrainConfig.intrinsic_reward``) + a bonus on completing g (reaching it, the search moving on) + a bonus per
+   ``TrainConfig.intrinsic_reward``) minus ``cross_track_penalty`` x the distance flown sideways to the line to g,
+   + a bonus on completing g (reaching it, the search moving on) + a bonus per
    newly covered cell (``coverage_bonus``; or per cell of ground swept by the footprint, ``coverage_swept``;
    times the search intensity with ``coverage_by_intensity``) + ``detection_bonus`` x the probability that the
    step detects the victim for the first time +
@@ -66,6 +67,15 @@ def atomic_torch_save(obj, path: Path) -> None:
     tmp = path.with_name(path.name + ".tmp")
     torch.save(obj, tmp)
     os.replace(tmp, path)
+
+
+def cross_track_m(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """(N,) metres each step from ``start`` to ``end`` moved sideways to the line from ``start`` to ``goal``:
+    |d x u| for the step d and the unit vector u towards the goal (0 where the drone is already at the goal)."""
+    step, to_goal = end - start, goal - start
+    length = np.hypot(*to_goal.T)
+    cross = np.abs(step[:, 0] * to_goal[:, 1] - step[:, 1] * to_goal[:, 0])
+    return np.divide(cross, length, out=np.zeros_like(length), where=length > 1e-6)
 
 
 class Trainer:
@@ -164,7 +174,8 @@ class Trainer:
         else:
             actions = self.low.act(self._norm(self.obs), deterministic=frozen).astype(np.float32)
         core = self.env.core
-        distance_before = np.hypot(*(core.position - core.goal_point).T)
+        start, goal_before = core.position.copy(), core.goal_point.copy()
+        distance_before = np.hypot(*(start - goal_before).T)
         covered_before = core.covered_cells.copy()
         swept_from = self._sweep_start() if self.hrl and cfg.coverage_swept else None
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
@@ -181,7 +192,9 @@ class Trainer:
             goal_completed = info["goal_completed"]
             toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
             searched = self._searched_cells(actions, info, covered_before, swept_from)
-            low_reward = (toward_goal / cfg.intrinsic_scale_m + cfg.intrinsic_goal_bonus * goal_completed
+            sideways = cross_track_m(start, info["position"], goal_before) if cfg.cross_track_penalty else 0.0
+            low_reward = ((toward_goal - cfg.cross_track_penalty * sideways) / cfg.intrinsic_scale_m
+                          + cfg.intrinsic_goal_bonus * goal_completed
                           + cfg.coverage_bonus * searched + cfg.detection_bonus * info["first_detection_chance"]
                           + cfg.extrinsic_weight * (reward - REWARD_STEP))
             self.segment_reached |= reached

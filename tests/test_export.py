@@ -146,7 +146,8 @@ def test_manifest_round_trips_and_describes_the_checkpoint(runs, artifacts):
         broken = {k: v for k, v in json.loads(manifest.to_json()).items() if k != "action"}
         with pytest.raises(ValueError, match="manifest is missing the field 'action'"):
             PolicyManifest.from_json(json.dumps(broken))
-        with pytest.raises(ValueError, match=re.escape('manifest.subgoal_interval must be an integer or null, got "ten"')):
+        message = 'manifest.subgoal_interval must be an integer or null, got "ten"'
+        with pytest.raises(ValueError, match=re.escape(message)):
             PolicyManifest.from_json(json.dumps({**broken, "action": {}, "subgoal_interval": "ten"}))
         assert (manifest.format, manifest.algorithm, manifest.format_version) == (fmt, algo, 1)
         assert TrainConfig.from_dict(manifest.training_config) == policy.config

@@ -17,7 +17,7 @@ from missions.search import footprint_half_width_m
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
 from policies.evaluation import evaluate_checkpoint
-from policies.train import Trainer
+from policies.train import Trainer, cross_track_m
 
 SMALL = NetworkConfig(hidden=(32, 32))
 
@@ -100,23 +100,27 @@ def test_meta_updates_run_per_completed_meta_transition(tmp_path, per_transition
     assert trainer.meta.num_updates == per_transition * sum(learning_transitions)
 
 
-@pytest.mark.parametrize("kind, coverage_bonus, by_intensity, swept, detection_bonus", [
-    ("progress", 0.0, True, False, 0.0), ("distance", 0.0, True, False, 0.0), ("progress", 0.5, False, False, 0.0),
-    ("progress", 0.5, True, False, 0.0), ("progress", 0.5, False, True, 0.0), ("progress", 0.5, True, True, 0.0),
-    ("progress", 0.0, False, False, 3.0)])
+@pytest.mark.parametrize("kind, coverage_bonus, by_intensity, swept, detection_bonus, cross_track", [
+    ("progress", 0.0, True, False, 0.0, 0.0), ("distance", 0.0, True, False, 0.0, 0.0),
+    ("progress", 0.5, False, False, 0.0, 0.0), ("progress", 0.5, True, False, 0.0, 0.0),
+    ("progress", 0.5, False, True, 0.0, 0.0), ("progress", 0.5, True, True, 0.0, 0.0),
+    ("progress", 0.0, False, False, 3.0, 0.0), ("progress", 0.0, False, False, 0.0, 2.0)])
 def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, coverage_bonus, by_intensity, swept,
-                                                             detection_bonus):
+                                                             detection_bonus, cross_track):
     config = small_config("hrl-sac", intrinsic_reward=kind, intrinsic_scale_m=100.0, intrinsic_goal_bonus=1.0,
                           extrinsic_weight=0.0, coverage_bonus=coverage_bonus, coverage_by_intensity=by_intensity,
-                          coverage_swept=swept, detection_bonus=detection_bonus, warmup_steps=1_000)
+                          coverage_swept=swept, detection_bonus=detection_bonus, cross_track_penalty=cross_track,
+                          warmup_steps=1_000)
     trainer = Trainer(config, tmp_path)
     captured, real_step = {}, trainer.env.step
 
     def spy(actions):
         core = trainer.env.core
         captured["before"] = np.hypot(*(core.position - core.goal_point).T)
-        captured["start"] = core.position.copy()
+        captured["start"], captured["goal"] = core.position.copy(), core.goal_point.copy()
         actions[:, 2] = (0.7, 0.9)  # in place: the sensor on in both environments, at two intensities
+        if cross_track:
+            actions[:, :2] = (-0.6, 0.8)  # full speed, south-east: not along env 0's line to its goal point
         if detection_bonus:
             actions[:, 3] = 0.0  # zoomed out: a 35 m footprint half-width at 50 m
         captured["intensity"], captured["zoom"] = actions[:, 2].copy(), actions[:, 3].copy()
@@ -148,8 +152,22 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
     completed = (distance <= config.flight.reach_radius_m) & moved_on
     chance = info["first_detection_chance"]
     assert detection_bonus == 0.0 or (chance[0] > 0.05 and chance[1] == 0.0)
-    expected = toward / 100.0 + completed + coverage_bonus * newly_covered + detection_bonus * chance
+    # sideways: the step's component across the line from the start to the goal point it was flying to
+    to_goal = captured["goal"] - captured["start"]
+    across = np.stack([to_goal[:, 1], -to_goal[:, 0]], axis=1) / np.maximum(np.hypot(*to_goal.T), 1e-9)[:, None]
+    sideways = np.abs(np.einsum("ij,ij->i", info["position"] - captured["start"], across))
+    if cross_track:  # env 0 flies at a random heading towards a distant point
+        assert np.hypot(*to_goal[0]) > 10.0 and sideways[0] > 0.1
+    expected = ((toward - cross_track * sideways) / 100.0 + completed + coverage_bonus * newly_covered
+                + detection_bonus * chance)
     np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], expected, rtol=1e-5, atol=1e-7)
+
+
+def test_cross_track_is_the_sideways_part_of_the_step():
+    start = np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 5.0], [1.0, 1.0]])
+    end = np.array([[3.0, 4.0], [3.0, -4.0], [5.0, 10.0], [2.0, 2.0]])
+    goal = np.array([[10.0, 0.0], [10.0, 0.0], [0.0, 5.0], [1.0, 1.0]])  # the last: already at its goal point
+    np.testing.assert_allclose(cross_track_m(start, end, goal), [4.0, 4.0, 5.0, 0.0])
 
 
 def test_flat_sac_learns_from_the_environment_reward(tmp_path):
