@@ -16,6 +16,8 @@ Variants, on the same first --episodes scenarios of the split (scenario i with e
   * coverage_unseen (runs whose low level sees the coverage map): deterministic, with the coverage inputs held
     at their training mean (normalised 0), as if the low level could not see the map.
 scripted_low_level and track_object_goals tell the levels apart: which learned half loses the success.
+Each variant's line gives success, coverage, detection rate, the median time to find (first detection step over
+the episodes with one, as ``hrlsac compare`` reports it), collisions and fence exits.
 
 It also prints what the deterministic policy does (mean movement command, share of steps with the sensor on,
 mean zoom, goal shares; HRL-SAC: how far the movement command points off the goal's point while the drone is
@@ -138,10 +140,14 @@ def main() -> int:
         metrics = summarise(outcome)
         results[name] = {key: metrics[key] for key in ("success_rate", "success_ci95", "coverage_mean",
                                                        "detection_rate", "out_of_bounds_rate", "collision_rate")}
+        # the comparison's "median time to find": median first-detection step over the episodes with one
+        results[name]["median_time_to_find"] = (metrics["time_to_first_detection"] or {}).get("p50")
         low, high = metrics["success_ci95"]
+        find = results[name]["median_time_to_find"]
         print(f"  {name:20s} success {metrics['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  coverage "
-              f"{metrics['coverage_mean']:.1%}  detection {metrics['detection_rate']:.1%}  collision "
-              f"{metrics['collision_rate']:.1%}  out of bounds {metrics['out_of_bounds_rate']:.1%}")
+              f"{metrics['coverage_mean']:.1%}  detection {metrics['detection_rate']:.1%}  find "
+              f"{'-' if find is None else f'{find:.0f}'}  collision {metrics['collision_rate']:.1%}  "
+              f"out of bounds {metrics['out_of_bounds_rate']:.1%}")
     # Every slot is stepped until the last episode ends: keep only the steps inside each slot's own episode.
     actions = np.concatenate([a[steps < lengths] for steps, a, _ in seen_actions])
     behaviour = {"mean_movement_command": float(np.linalg.norm(actions[:, MOVEMENT], axis=1).mean()),

@@ -114,9 +114,10 @@ class TrainConfig:
 
     update_dtype: str = "bfloat16"
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
-    weights, Adam, outputs and losses stay float32, acting stays float32) or "float32" (the paper preset). On this
-    machine's AVX-512 BF16 CPU bfloat16 trains flat SAC at the default preset at 1.58x the float32 steps/s
-    (benchmarks/train_speed.py: 148.6 against 94.2) and learned as well (HRL-SAC seed 0, 100,000 steps: 29.0 %
+    weights, Adam, outputs and losses stay float32, acting stays float32) or "float32" (the paper preset). On an
+    AMD EPYC (AVX-512 BF16) bfloat16 trains flat SAC at the default preset at 1.58x the float32 steps/s
+    (benchmarks/train_speed.py: 148.6 against 94.2; on an Intel Xeon with AVX-512 BF16 and AMX, 2026-12-02, only
+    1.06x: docs/training.md) and learned as well (HRL-SAC seed 0, 100,000 steps: 29.0 %
     test success in both). On CPUs without AVX-512 BF16 or AMX it may be slower (not measured): try "float32"
     there. The two round differently: each is reproducible, they are not bit-equal."""
 
