@@ -141,7 +141,7 @@ def main() -> int:
         results[name] = {key: metrics[key] for key in ("success_rate", "success_ci95", "coverage_mean",
                                                        "detection_rate", "out_of_bounds_rate", "collision_rate")}
         # the comparison's "median time to find": median first-detection step over the episodes with one
-        results[name]["median_time_to_find"] = (metrics["time_to_first_detection"] or {}).get("p50")
+        results[name]["median_time_to_find"] = metrics["time_to_first_detection"]["p50"]  # None: no detection
         low, high = metrics["success_ci95"]
         find = results[name]["median_time_to_find"]
         print(f"  {name:20s} success {metrics['success_rate']:6.1%} [{low:.1%}, {high:.1%}]  coverage "

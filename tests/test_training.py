@@ -156,7 +156,7 @@ def test_low_level_reward_measures_the_way_to_the_goal_point(tmp_path, kind, cov
     to_goal = captured["goal"] - captured["start"]
     across = np.stack([to_goal[:, 1], -to_goal[:, 0]], axis=1) / np.maximum(np.hypot(*to_goal.T), 1e-9)[:, None]
     sideways = np.abs(np.einsum("ij,ij->i", info["position"] - captured["start"], across))
-    if cross_track:  # env 0 flies at a random heading towards a distant point
+    if cross_track:  # env 0 flies south-east towards a distant point off that line: a real sideways part
         assert np.hypot(*to_goal[0]) > 10.0 and sideways[0] > 0.1
     expected = ((toward - cross_track * sideways) / 100.0 + completed + coverage_bonus * newly_covered
                 + detection_bonus * chance)
