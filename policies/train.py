@@ -151,8 +151,11 @@ class Trainer:
             goals = self.meta.act(self._norm(meta_obs))
         all_goals = np.zeros(self.config.num_envs, dtype=np.int64)
         all_goals[need] = goals
+        # The meta transition's state is what the meta-controller acted on: after set_goals the observation's
+        # target_offset points at the chosen goal's point, so the critics would learn from states revealing
+        # the action.
+        self.segment_obs[need] = meta_obs
         self.obs = self.env.set_goals(all_goals, need)
-        self.segment_obs[need] = self.obs[need, :META_OBS_DIM]
         self.segment_goal[need] = goals
         self.segment_return[need] = 0.0
         self.segment_steps[need] = 0

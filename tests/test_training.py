@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from autonomy.observation import META_OBS_DIM
 from missions.goals import SEARCH_LOCATION
 from missions.mission import FlightSettings
 from missions.search import footprint_half_width_m
@@ -69,18 +70,43 @@ def test_meta_transitions_carry_k_step_discounted_returns(tmp_path):
         return result
 
     trainer.env.step = spy
-    first_meta_obs = None
-    for t in range(5):
+    for _ in range(5):
         trainer.collect()
-        if t == 0:
-            first_meta_obs = trainer.segment_obs.copy()
     meta = trainer.meta_buffer
     assert len(meta) == 2  # one finished 5-step segment per environment
     expected = sum(0.9 ** i * rewards[i] for i in range(5))
     np.testing.assert_allclose(meta.data["reward"][:2], expected, rtol=1e-6)
     np.testing.assert_allclose(meta.data["discount"][:2], 0.9 ** 5, rtol=1e-6)
-    np.testing.assert_array_equal(meta.data["obs"][:2], first_meta_obs)
     assert trainer.needs_goal.all()
+
+
+def test_meta_transitions_store_the_state_the_meta_controller_acted_on(tmp_path):
+    """Two runs alike but for the goal their meta-controller picks: the state each stores for that decision is the
+    environment's meta observation at the moment of the decision (read from the environment, not from the
+    trainer), the same in both runs, although the observations right after the goals were set differ."""
+    stored, acted_on, after_goal = {}, {}, {}
+    for goal in (0, 3):  # ExploreArea's point lies away from the start, ReturnToBase's on it
+        config = small_config("hrl-sac", warmup_steps=0, flight=FlightSettings(max_steps=500, subgoal_interval=5))
+        trainer = Trainer(config, tmp_path / str(goal))
+        seen, real_set_goals = [], trainer.env.set_goals
+
+        def choose(normalised_obs, trainer=trainer, seen=seen, goal=goal):
+            seen.append(trainer.env.core.meta_observation.copy())  # what the environment showed at the decision
+            return np.full(len(normalised_obs), goal)
+
+        def set_goals(goals, mask, goal=goal, real_set_goals=real_set_goals):
+            after_goal[goal] = real_set_goals(goals, mask)[:, :META_OBS_DIM].copy()
+            return real_set_goals(goals, mask)
+
+        trainer.meta.act, trainer.env.set_goals = choose, set_goals
+        for _ in range(5):
+            trainer.collect()
+        assert len(seen) == 1 and len(trainer.meta_buffer) == 2
+        stored[goal], acted_on[goal] = trainer.meta_buffer.data["obs"][:2].copy(), seen[0]
+        np.testing.assert_array_equal(trainer.meta_buffer.data["action"][:2], [goal, goal])
+    np.testing.assert_array_equal(stored[0], acted_on[0])
+    np.testing.assert_array_equal(stored[0], stored[3])
+    assert not np.array_equal(after_goal[0], after_goal[3])  # the goal's point shows once it is set
 
 
 @pytest.mark.parametrize("per_transition", [1, 3])
