@@ -3,8 +3,9 @@
 The runner feeds every LOCAL_POSITION_NED and/or GLOBAL_POSITION_INT it hears and asks
 :meth:`PoseEstimator.predict_to` for the pose at its control time; the policy sees that filtered pose,
 never simulator truth. State: NED position and velocity (plus acceleration for the constant-acceleration
-model), metres relative to home. Time is the vehicle's ``time_boot_ms``, never the wall clock, so link
-latency does not distort the steps and replays are reproducible.
+model), metres relative to home. Time is the vehicle's ``time_boot_ms`` (by default), or that stamp mapped
+onto the runner's clock by :mod:`autonomy.vehicle_time` (the runner's case: it predicts to its own clock), never
+a message's arrival time, so link latency does not distort the steps and replays are reproducible.
 
 How each message is handled (every outcome is counted, so the runner can log it):
 
@@ -135,6 +136,8 @@ class PoseEstimator:
     def __init__(self, config: EstimatorConfig = EstimatorConfig(), home: GeoPoint | None = None) -> None:
         self.config = config
         self._frame = LocalFrame(home) if home is not None else None
+        self.origin = home
+        """The geodetic origin of the NED frame (the ``home`` given), or None."""
         self._order = MODELS[config.model]
         self._kf = KalmanFilter(dim_x=3 * self._order, dim_z=6)
         self._kf.H = np.eye(6, 3 * self._order)  # we measure position and velocity, not acceleration
@@ -148,19 +151,29 @@ class PoseEstimator:
         self.accepted = self.rejected_outliers = self.ignored_stale = 0
         self.ignored_duplicates = self.ignored_invalid = self.reinitialisations = 0
         self.last_reinit_reason = ""
+        self._pending_reason = ""  # why the next initialisation is a re-initialisation (restart)
 
-    def update_local_position_ned(self, msg) -> str:
-        """Fuse a pymavlink LOCAL_POSITION_NED message; returns the outcome (see :meth:`update`)."""
-        return self.update(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz),
-                           LOCAL_POSITION_NED)
+    def update_local_position_ned(self, msg, time_s: float | None = None) -> str:
+        """Fuse a pymavlink LOCAL_POSITION_NED message; returns the outcome (see :meth:`update`). ``time_s``: the
+        message's time on the caller's clock (default: its time_boot_ms; see autonomy.vehicle_time)."""
+        return self.update(msg.time_boot_ms / 1000.0 if time_s is None else time_s, (msg.x, msg.y, msg.z),
+                           (msg.vx, msg.vy, msg.vz), LOCAL_POSITION_NED)
 
-    def update_global_position_int(self, msg) -> str:
-        """Fuse a pymavlink GLOBAL_POSITION_INT message (degE7, mm, cm/s); needs ``home``."""
+    def update_global_position_int(self, msg, time_s: float | None = None) -> str:
+        """Fuse a pymavlink GLOBAL_POSITION_INT message (degE7, mm, cm/s); needs ``home``. ``time_s`` as for
+        :meth:`update_local_position_ned`."""
         if self._frame is None:
             raise ValueError("PoseEstimator needs home=GeoPoint(...) (from HOME_POSITION) to fuse GLOBAL_POSITION_INT")
         position = self._frame.to_ned(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0)
-        return self.update(msg.time_boot_ms / 1000.0, position, (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0),
-                           GLOBAL_POSITION_INT)
+        return self.update(msg.time_boot_ms / 1000.0 if time_s is None else time_s, position,
+                           (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0), GLOBAL_POSITION_INT)
+
+    def restart(self, reason: str) -> None:
+        """Forget the state: the next measurement re-initialises the filter (counted, with ``reason``). For a
+        vehicle whose timeline changed (a reboot): its old pose says nothing about the new one."""
+        if self._time_s is not None:
+            self._time_s = None
+            self._pending_reason = reason
 
     def update(self, time_s: float, position_ned, velocity_ned, source: str) -> str:
         """Fuse one measurement taken at vehicle time ``time_s`` (s since boot) from ``source``.
@@ -174,7 +187,8 @@ class PoseEstimator:
             self.ignored_invalid += 1  # autopilots send NaN for fields they do not have
             return "invalid"
         if self._time_s is None:
-            return self._initialise(time_s, z, source, reason="")
+            reason, self._pending_reason = self._pending_reason, ""
+            return self._initialise(time_s, z, source, reason=reason)
         if self._last_seen_s.get(source) == time_s:
             self.ignored_duplicates += 1
             return "duplicate"

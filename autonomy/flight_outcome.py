@@ -11,6 +11,9 @@ Outcomes:
   the vehicle raised no failsafe of its own.
 * ``safe``: something went wrong (a runner failsafe or abort, a vehicle failsafe) but the vehicle ended landed and
   disarmed, returning (RTL), landing, or holding position (HOLD or POSCTL); ``reason`` says what went wrong first.
+* ``ditched``: the vehicle touched the surface farther than ``FlyawayLimits.home_radius_m`` from home, in any mode
+  (over a search area at sea that is the loss of the drone, whatever the autopilot thought it was doing); it
+  outranks ``safe`` and ``completed``: a drone that descended into the water is not an end state to grade safe.
 * ``flyaway``: the vehicle went more than ``FlyawayLimits.fence_excursion_m`` beyond the geofence, or kept flying
   OFFBOARD with no fresh setpoint for longer than ``FlyawayLimits.stale_setpoint_s`` (PX4's default offboard-loss
   time plus half a second: a vehicle whose failsafe was set later, or off, is caught too), or was still flying in
@@ -18,6 +21,7 @@ Outcomes:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from missions.mission import Mission
@@ -43,10 +47,13 @@ class FlyawayLimits:
     """After the runner ends, the vehicle flies on alone at most this long (s, simulated)."""
     hold_settle_s: float = 10.0
     """...and stops earlier once it has held position (HOLD/POSCTL) this long (s): a hover is its end state."""
+    home_radius_m: float = 10.0
+    """Touching the surface farther than this from home (m, true position) is ditching."""
 
     def __post_init__(self) -> None:
         check_fields(self, (("fence_excursion_m", 0.0, 10_000.0), ("stale_setpoint_s", 0.1, 60.0),
-                            ("settle_s", 0.0, 7200.0), ("hold_settle_s", 0.0, 600.0)))
+                            ("settle_s", 0.0, 7200.0), ("hold_settle_s", 0.0, 600.0),
+                            ("home_radius_m", 0.0, 10_000.0)))
 
 
 class FlightWatch:
@@ -62,6 +69,7 @@ class FlightWatch:
         self.longest_offboard_gap_s = 0.0
         self.vehicle_failsafes: list[dict] = []
         self.flyaway: str | None = None
+        self.ditched: str | None = None
         self.settled_s = 0.0
 
     def on_vehicle_event(self, event: AutopilotEvent) -> None:
@@ -78,6 +86,9 @@ class FlightWatch:
         self.max_fence_excursion_m = max(self.max_fence_excursion_m, excursion)
         if excursion > limits.fence_excursion_m and self.flyaway is None:
             self.flyaway = f"{excursion:.0f} m beyond the geofence at {now:.1f} s"
+        from_home_m = math.hypot(state.north_m, state.east_m)
+        if state.on_ground and from_home_m > limits.home_radius_m and self.ditched is None:
+            self.ditched = f"touched the surface {from_home_m:.0f} m from home at {now:.1f} s in {autopilot.mode.name}"
         if autopilot.armed and autopilot.mode is FlightMode.OFFBOARD and not state.on_ground:
             gap = now - autopilot.setpoint.time_s if autopilot.setpoint else now
             self.longest_offboard_gap_s = max(self.longest_offboard_gap_s, gap)
@@ -119,6 +130,8 @@ class FlightWatch:
         safe_end = landed or (autopilot.armed and autopilot.mode in HOLDING_MODES + RETURNING_MODES)
         if self.flyaway is not None:
             outcome, reason = "flyaway", self.flyaway
+        elif self.ditched is not None:
+            outcome, reason = "ditched", self.ditched
         elif not safe_end:
             outcome, reason = "flyaway", f"still {self.end_state()} when the settling time ran out"
         elif not problems and landed and report["transitions"][-1]["reason"] == "landed and disarmed":

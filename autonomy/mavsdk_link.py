@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand
 from autonomy.vehicle_link import CommandAck, LinkError
+from missions.geodesy import GeoPoint
 
 _FLIGHT_MODES = {"HOLD": "LOITER", "RETURN_TO_LAUNCH": "RTL", "TAKEOFF": "TAKEOFF", "LAND": "LAND",
                  "OFFBOARD": "OFFBOARD", "MISSION": "MISSION", "POSCTL": "POSCTL", "ALTCTL": "ALTCTL",
@@ -56,7 +57,7 @@ class MavsdkLink:
         self.sent_heartbeats = 0  # MAVSDK sends the companion heartbeat itself
         self._mode: str | None = None
         self._armed = False
-        self._home_amsl: float | None = None
+        self._home: GeoPoint | None = None
         self._battery: float | None = None
         self._samples: list = []
         self._pending: set[Future] = set()
@@ -118,7 +119,11 @@ class MavsdkLink:
 
     async def _watch_home(self) -> None:
         async for home in self.telemetry.subscribe_home():
-            self._home_amsl = float(home.absolute_altitude_m)
+            try:
+                self._home = GeoPoint(float(home.latitude_deg), float(home.longitude_deg),
+                                      float(home.absolute_altitude_m))
+            except ValueError:  # NaN before the vehicle has a home
+                self._home = None
 
     async def _watch_battery(self) -> None:
         async for battery in self.telemetry.subscribe_battery():
@@ -144,8 +149,11 @@ class MavsdkLink:
     def vehicle_description(self) -> str:
         return "autopilot found by MAVSDK"
 
+    def home_position(self) -> GeoPoint | None:
+        return self._home
+
     def home_altitude_amsl(self) -> float | None:
-        return self._home_amsl
+        return None if self._home is None else self._home.alt_m
 
     def battery_percent(self) -> float | None:
         return self._battery
@@ -164,7 +172,7 @@ class MavsdkLink:
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             call = self.action.arm() if params[0] else self.action.disarm()
         elif command == mavlink.MAV_CMD_NAV_TAKEOFF:
-            call = self._takeoff(params[6] - (self._home_amsl or 0.0))
+            call = self._takeoff(params[6] - (self.home_altitude_amsl() or 0.0))
         elif command == mavlink.MAV_CMD_DO_SET_MODE:
             call = self.offboard.start()
         elif command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:

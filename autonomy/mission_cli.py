@@ -32,6 +32,9 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
         sub.add_argument("--seed", type=int, default=0,
                          help="seed of the simulated camera's detections (and of the vehicle's sensor noise)")
         sub.add_argument("--quiet", action="store_true", help="print only the summary")
+        sub.add_argument("--accept-flight-mismatch", action="store_true",
+                         help="fly a mission whose altitude, speed, step period, K or max_steps differ from the "
+                              "policy's training settings (warns, naming each difference); refused without it")
         sub.add_argument("--signing-key", metavar="FILE", default=None,
                          help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything sent, drop wrongly "
                               "signed or replayed messages" + (" (the simulated vehicle uses it too)"
@@ -75,6 +78,7 @@ def main(argv: list[str], prog: str = "hrlsac mission") -> int:
             args.faults = parse_link_faults(args.link_faults)
         if args.command == "replay":
             args.pool = pool_from_arguments(args)
+        _check_flight_settings(mission, policy, args.accept_flight_mismatch, args.mission)
     except (MissionFileError, PolicyArtifactError, ValueError, WorkerPoolError) as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
@@ -87,6 +91,22 @@ def main(argv: list[str], prog: str = "hrlsac mission") -> int:
     if args.command == "replay":
         return _replay(mission, policy, args, out)
     return _run(mission, policy, args, out, name)
+
+
+def _check_flight_settings(mission, policy, accept: bool, mission_path: str) -> None:
+    """Refuse (ValueError) a mission flown with other flight settings than the policy was trained with, or, with
+    ``accept``, warn on stderr naming each difference."""
+    from autonomy.preflight import flight_mismatches
+
+    differences = flight_mismatches(mission.flight, policy.manifest.training_config)
+    if not differences:
+        return
+    listed = "; ".join(differences)
+    if not accept:
+        raise ValueError(f"{mission_path}: flight settings differ from the policy's training ({listed}): change the "
+                         "mission's flight block, or pass --accept-flight-mismatch to fly it anyway")
+    print(f"warning: {mission_path}: flying with flight settings the policy was not trained with ({listed})",
+          file=sys.stderr)
 
 
 def _replay(mission, policy, args, out: Path) -> int:
@@ -183,4 +203,7 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     partial.finish(report)
     print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "
           f"report: {out / REPORT}")
-    return 1 if any(event["event"] == "abort" for event in report["events"]) else 0
+    aborts = [event["reason"] for event in report["events"] if event["event"] == "abort"]
+    for reason in aborts:
+        print(f"{name}: error: {reason}", file=sys.stderr)
+    return 1 if aborts else 0

@@ -27,7 +27,7 @@ from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder, VideoRe
 from autonomy.runner import MissionRunner, RunnerConfig
 from autonomy.search_pilot import SearchPilot
 from autonomy.vehicle_link import COMPANION_COMPONENT, VehicleLink
-from missions.geodesy import GeoPoint, LocalFrame
+from missions.geodesy import GeoPoint
 from missions.mission import Mission
 from missions.render import render_search
 from sitl_bridge.dynamics import MultirotorParams
@@ -52,10 +52,8 @@ class VehicleClock:
 
 
 def start_point(mission: Mission) -> GeoPoint:
-    """Where the vehicle boots: the scenario's start, as a geodetic point."""
-    scenario = mission.scenario
-    lat, lon, alt = LocalFrame(scenario.home).to_geodetic(scenario.start_north_m, scenario.start_east_m, 0.0)
-    return GeoPoint(lat, lon, alt)
+    """Where the vehicle boots: the mission's launch point (its scenario's start, at home's altitude)."""
+    return mission.launch_point
 
 
 def airframe_for(mission: Mission) -> MultirotorParams:

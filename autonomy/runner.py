@@ -26,9 +26,11 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.estimator import PoseEstimator
+from autonomy.preflight import describe_point, home_disagreement
 from autonomy.search_pilot import Decision, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
 from autonomy.vehicle_link import VehicleLink, enum_name
+from autonomy.vehicle_time import BootTimeConfig, BootTimeMap
 from missions.mission import Mission
 from missions.validation import check_fields
 
@@ -83,7 +85,15 @@ class RunnerConfig:
     fence_lookahead_s: float = 2.0
     """The guard turns back when the commanded velocity would cross the margin within this time."""
     altitude_gain: float = 0.5
-    """Vertical velocity per metre of altitude error (holds the search altitude)."""
+    """Vertical velocity per metre of altitude error (holds the search altitude above the vehicle's home)."""
+    home_tolerance_m: float = 50.0
+    """Largest horizontal distance between the mission's launch point and the vehicle's home (HOME_POSITION);
+    farther, and the mission is refused before arming (GPS homes agree within a few metres)."""
+    boot_time: BootTimeConfig = field(default_factory=BootTimeConfig)
+    """How the vehicle's time_boot_ms is mapped onto the runner's clock (autonomy.vehicle_time)."""
+    home_altitude_tolerance_m: float = 15.0
+    """Largest difference between the mission's home altitude (when the file gives it) and the vehicle's home
+    altitude, AMSL; more, and the mission is refused before arming (GPS altitude errs by a few metres)."""
 
     def __post_init__(self) -> None:
         check_fields(self, (("offboard_lead_s", 1.0, 10.0), ("connect_timeout_s", 0.1, 600.0),
@@ -94,7 +104,8 @@ class RunnerConfig:
                             ("policy_stall_rtl_s", 0.5, 120.0), ("failsafe_hold_s", 0.0, 30.0),
                             ("low_battery_pct", 0.0, 100.0),
                             ("fence_margin_m", 0.0, 500.0), ("fence_lookahead_s", 0.0, 30.0),
-                            ("altitude_gain", 0.01, 5.0)), integers=("command_retries",))
+                            ("altitude_gain", 0.01, 5.0), ("home_tolerance_m", 0.0, 10_000.0),
+                            ("home_altitude_tolerance_m", 0.0, 10_000.0)), integers=("command_retries",))
 
 
 class DecisionWorker:
@@ -149,6 +160,7 @@ class MissionRunner:
                               max_vertical_mps=config.stream.max_vertical_mps)
         self.streamer = SetpointStreamer(stream, link.send_velocity)
         self.worker = DecisionWorker(pilot, threaded_policy, simulated_policy_s)
+        self.boot_time = BootTimeMap(config.boot_time)
         self.state: str | None = None
         self.transitions: list[dict] = []
         self.events: list[dict] = []
@@ -157,7 +169,7 @@ class MissionRunner:
         self.search_end: str | None = None
         self._zoom_percent: int | None = None
         self._last_decision_s = -math.inf
-        self._altitude_target_m = -mission.flight.altitude_m
+        self._height_target_m = mission.flight.altitude_m  # above the vehicle's home
         self._record("CONNECT", "start")
 
     # ------------------------------------------------------------------ bookkeeping
@@ -176,7 +188,7 @@ class MissionRunner:
     def tick(self) -> None:
         """One control tick: telemetry in, heartbeat and setpoints out. States call it while they wait."""
         self.clock.advance()
-        receive_telemetry(self.link, self.estimator)
+        receive_telemetry(self.link, self.estimator, self.boot_time)
         self.streamer.tick(self.clock.now())
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str) -> None:
@@ -236,8 +248,16 @@ class MissionRunner:
         self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0)
 
     def _preflight(self) -> None:
-        self.wait_until(lambda: self.estimator.converged and self.link.home_altitude_amsl() is not None,
+        self.wait_until(lambda: self.estimator.converged and self.link.home_position() is not None,
                         self.config.preflight_timeout_s, "waiting for a converged position estimate and home")
+        home = self.link.home_position()
+        problem = home_disagreement(self.mission, home, self.config.home_tolerance_m,
+                                    self.config.home_altitude_tolerance_m)
+        if problem is not None:
+            raise MissionAborted(f"refused before arming: {problem}")
+        if not self.mission.home_altitude_known:
+            self._event("warning", f"the mission gives no home altitude: the search altitude is held above the "
+                                   f"vehicle's home ({describe_point(home)}), the search area assumed at its level")
         self._record("ARM", "pose estimate converged, home known")
 
     def _arm_and_take_off(self) -> None:
@@ -246,10 +266,10 @@ class MissionRunner:
         target_amsl = self.link.home_altitude_amsl() + self.mission.flight.altitude_m
         self.command(mavlink.MAV_CMD_NAV_TAKEOFF, math.nan, 0, 0, math.nan, math.nan, math.nan, target_amsl,
                      what="takeoff", took_effect=lambda: self.link.flight_mode == "TAKEOFF")
-        self.wait_until(lambda: self._altitude_m() >= self.mission.flight.altitude_m - 1.5
+        self.wait_until(lambda: self._height_m() >= self.mission.flight.altitude_m - 1.5
                         and self.link.flight_mode != "TAKEOFF", self.config.takeoff_timeout_s,
                         f"climbing to {self.mission.flight.altitude_m:g} m")
-        self._record("OFFBOARD", f"at {self._altitude_m():.1f} m")
+        self._record("OFFBOARD", f"at {self._height_m():.1f} m above home")
 
     def _offboard(self) -> None:
         self.streamer.start(self.clock.now(), HOLD)
@@ -299,6 +319,9 @@ class MissionRunner:
             return
         self._last_decision_s = now
         vn, ve = self._fence_guard(vn, ve, now)
+        # A close look may ask for another height (Decision.altitude_m); None: the mission's search altitude.
+        wanted = getattr(decision, "altitude_m", None)
+        self._height_target_m = self.mission.flight.altitude_m if wanted is None else float(wanted)
         self.streamer.command(VelocityCommand(vn, ve, self._altitude_hold()), now)
         self._set_zoom(decision.zoom)
 
@@ -341,12 +364,24 @@ class MissionRunner:
                                     f"{guarded[1]:.1f}) m/s at ({north:.0f}, {east:.0f}) m")
         return guarded[0], guarded[1]
 
-    def _altitude_m(self) -> float:
-        return -float(self.estimator.position_ned[2]) if self.estimator.time_s is not None else 0.0
+    def _height_m(self) -> float:
+        """Filtered height above the vehicle's home (HOME_POSITION), 0 before any estimate.
+
+        The estimator's NED frame is the mission's home point (``estimator.origin``); its altitude may differ from
+        the vehicle's home (a mission file without ``alt_m``, a home set at arming). Heights are always taken above
+        the vehicle's home, as the autopilot's own takeoff, RTL and relative altitude are: holding them relative to
+        the mission's altitude flew the drone into the water when the two disagreed.
+        """
+        if self.estimator.time_s is None:
+            return 0.0
+        home_amsl = self.link.home_altitude_amsl()
+        origin = self.estimator.origin
+        offset_m = home_amsl - origin.alt_m if home_amsl is not None and origin is not None else 0.0
+        return -float(self.estimator.position_ned[2]) - offset_m
 
     def _altitude_hold(self) -> float:
-        error = self._altitude_target_m - float(self.estimator.position_ned[2])
-        return self.config.altitude_gain * error
+        """Vertical velocity (NED, down positive) towards the target height above the vehicle's home."""
+        return self.config.altitude_gain * (self._height_m() - self._height_target_m)
 
     def _set_zoom(self, zoom: float) -> None:
         """MAV_CMD_SET_CAMERA_ZOOM (zoom range, percent) only when the zoom changes by a 5 % step."""
@@ -360,10 +395,11 @@ class MissionRunner:
         # The one command that must get through: keep asking until the link is back (or link_recovery_s is over).
         config = self.config
         attempts = max(config.command_retries, math.ceil(config.link_recovery_s / config.command_timeout_s))
+        # RTL itself, not LAND: a vehicle that a failsafe put into LAND out over the water would ditch there.
         self.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, what="return to launch", attempts=attempts,
-                     took_effect=lambda: self.link.flight_mode in ("RTL", "LAND"))
+                     took_effect=lambda: self.link.flight_mode == "RTL")
         self.streamer.stop()
-        self.wait_until(lambda: self.link.flight_mode in ("RTL", "LAND"), 5.0, "RTL in the heartbeat")
+        self.wait_until(lambda: self.link.flight_mode == "RTL", 5.0, "RTL in the heartbeat")
         self._record("LAND", "returning")
         self.wait_until(lambda: not self.link.armed, self.config.land_timeout_s, "landing and disarm")
         self._record("DONE", "landed and disarmed")
@@ -371,7 +407,7 @@ class MissionRunner:
     def _abort(self, reason: str) -> None:
         """After a failed state: return home if flying, else stop. From TAKEOFF too: a takeoff whose ACKs were
         all lost may still have flown (the vehicle then hovers where it climbed to)."""
-        airborne = self._altitude_m() > 1.0  # on the ground the vehicle disarms itself (COM_DISARM_PRFLT)
+        airborne = self._height_m() > 1.0  # on the ground the vehicle disarms itself (COM_DISARM_PRFLT)
         if self.state in ("TAKEOFF", "OFFBOARD", "SEARCH") and self.link.armed and airborne:
             try:
                 self._return_and_land(f"abort: {reason}")
@@ -396,16 +432,26 @@ class MissionRunner:
             "failsafes": [e for e in self.events if e["event"] == "failsafe"],
             "events": self.events,
             "estimator": self.estimator.counters(),
+            "vehicle_time": {"offset_s": self.boot_time.offset_s, "timeline_changes": self.boot_time.timeline_changes,
+                             "last_change": self.boot_time.last_change, "ignored": self.boot_time.ignored},
         }
 
 
-def receive_telemetry(link: VehicleLink, estimator: PoseEstimator) -> list:
-    """Everything the vehicle sent since the last call, its positions fused into the estimator (the runner's whole
-    receive path: :mod:`tests.test_fuzz_mavlink` feeds it garbage)."""
+def receive_telemetry(link: VehicleLink, estimator: PoseEstimator, boot_time: BootTimeMap) -> list:
+    """Everything the vehicle sent since the last call, its positions fused into the estimator on the runner's clock
+    (``boot_time`` maps their time_boot_ms; a new vehicle timeline restarts the filter). The runner's whole receive
+    path: :mod:`tests.test_fuzz_mavlink` feeds it garbage."""
     messages = link.tick()
+    now = link.clock()
     for msg in messages:
         if msg.get_type() == "GLOBAL_POSITION_INT":
-            estimator.update_global_position_int(msg)
+            time_s = boot_time.to_runner_time(msg.time_boot_ms, now)
+            if time_s is None:
+                continue
+            if boot_time.timeline_changed:
+                boot_time.timeline_changed = False
+                estimator.restart(boot_time.last_change)
+            estimator.update_global_position_int(msg, time_s)
     return messages
 
 

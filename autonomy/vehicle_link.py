@@ -29,6 +29,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand, setpoint_message_args
+from missions.geodesy import GeoPoint
 from missions.signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_timestamp
 
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
@@ -224,10 +225,21 @@ class VehicleLink:
         return (f"vehicle {self.target_system}/{self.target_component} "
                 f"({enum_name('MAV_AUTOPILOT', beat.autopilot)})")
 
+    def home_position(self) -> GeoPoint | None:
+        """The vehicle's home (HOME_POSITION: latitude, longitude, altitude AMSL); None before it arrived or when
+        it is not a valid position (a vehicle without a fix may send zeros or out-of-range values)."""
+        home = self.latest.get("HOME_POSITION")
+        if home is None:
+            return None
+        try:
+            return GeoPoint(home.latitude / 1e7, home.longitude / 1e7, home.altitude / 1000.0)
+        except ValueError:
+            return None
+
     def home_altitude_amsl(self) -> float | None:
         """Home's altitude above mean sea level (m), from HOME_POSITION; None before it arrived."""
-        home = self.latest.get("HOME_POSITION")
-        return None if home is None else home.altitude / 1000.0
+        home = self.home_position()
+        return None if home is None else home.alt_m
 
     def battery_percent(self) -> float | None:
         """Battery remaining (SYS_STATUS), None if unknown."""

@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from autonomy.estimator import PoseEstimator  # noqa: E402
+from autonomy.vehicle_time import BootTimeMap  # noqa: E402
 from autonomy.runner import receive_telemetry  # noqa: E402
 from autonomy.vehicle_link import VehicleLink, enum_name  # noqa: E402
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair  # noqa: E402
@@ -236,12 +237,13 @@ class RunnerTarget:
         self.link = VehicleLink(MemoryMavConnection(client_end, source_system=1, source_component=191),
                                 lambda: self.time_s, signing_key=signing_key)
         self.estimator = PoseEstimator(home=DEFAULT_HOME)
+        self.boot_time = BootTimeMap()
         self.accepted = 0
 
     def feed(self, data: bytes) -> None:
         self.time_s += 0.01
         self.vehicle_end.send(data)
-        self.accepted += len(receive_telemetry(self.link, self.estimator))
+        self.accepted += len(receive_telemetry(self.link, self.estimator, self.boot_time))
         self.vehicle_end.receive()  # the companion's heartbeats: not needed
         self.read_like_the_runner()
 

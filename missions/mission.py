@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from missions.geodesy import GeoPoint, LocalFrame
 from missions.scenario import Scenario, SearchArea
 from missions.validation import check_fields
 
@@ -39,12 +40,23 @@ class Mission:
     name: str = "mission"
     geofence: SearchArea | None = None
     """Where the drone may fly; None means the search area itself. Must contain the search area."""
+    home_altitude_known: bool = True
+    """Whether ``scenario.home.alt_m`` was given (a mission file may leave it out). The runner holds the search
+    altitude relative to the vehicle's own home either way; a known altitude is also checked against it."""
 
     def __post_init__(self) -> None:
         fence, area = self.geofence, self.scenario.area
         if fence is not None and not (fence.north_min_m <= area.north_min_m and fence.north_max_m >= area.north_max_m
                                       and fence.east_min_m <= area.east_min_m and fence.east_max_m >= area.east_max_m):
             raise ValueError("Mission.geofence must contain the search area (scenario.area)")
+
+    @property
+    def launch_point(self) -> GeoPoint:
+        """Where the drone takes off: the scenario's start (normally home), at home's altitude. A vehicle flying
+        this mission should have its home here (the simulated vehicle boots here in a replay)."""
+        scenario = self.scenario
+        lat, lon, alt = LocalFrame(scenario.home).to_geodetic(scenario.start_north_m, scenario.start_east_m, 0.0)
+        return GeoPoint(lat, lon, alt)
 
     @property
     def fence(self) -> SearchArea:

@@ -14,7 +14,7 @@ A mission file says how to fly (``flight``), where the drone may go (``geofence`
     geofence: {north_min_m: -100, north_max_m: 1000, east_min_m: -550, east_max_m: 550}
                                 # optional; must contain scenario.area (default: the area itself)
     scenario:                   # exactly one of: inline fields, generator, dataset
-      home: {lat_deg: 47.397742, lon_deg: 8.545594, alt_m: 488}        # required; alt_m optional (0)
+      home: {lat_deg: 47.397742, lon_deg: 8.545594, alt_m: 488}        # required; alt_m optional (AMSL)
       area: {north_min_m: -50, north_max_m: 950, east_min_m: -500, east_max_m: 500}   # required
       start: {north_m: 0, east_m: 0}                                    # optional (home)
       datum: {north_m: 600, east_m: 120, sigma_m: 80}                   # required; sigma_m optional (100)
@@ -39,7 +39,10 @@ Instead of the inline fields, a scenario can be a reference:
   seed of ``YoloDataset.scenarios(split, seed=seed)``, whose scenario for that image the mission reproduces
   exactly (same drawn conditions, current and datum).
 
-Positions are metres north/east of home (local NED frame). Categories: person, boat, life_jacket, debris,
+Positions are metres north/east of home (local NED frame). ``home.alt_m`` is home's altitude above mean sea
+level; the runner holds the search altitude relative to the vehicle's own home (HOME_POSITION) and refuses a
+mission whose launch point (``start``, at home's altitude) is farther from the vehicle's home than its tolerance;
+when ``alt_m`` is left out only the horizontal distance is checked. Categories: person, boat, life_jacket, debris,
 floating_object, swimmer. Conditions: ``sea`` calm/moderate/rough, ``weather`` clear/cloudy/foggy/rainy,
 ``time_of_day`` dawn/day/dusk/night, ``visibility`` [0.3, 1], ``wind`` [0, 1] of 15 m/s, ``wind_direction_deg``
 the direction the wind blows towards. Beware YAML 1.1: ``1e3`` and ``1.0e3`` are strings there; write ``1000`` or
@@ -172,6 +175,8 @@ def mission_to_dict(mission: Mission) -> dict[str, Any]:
     if mission.geofence is not None:
         data["geofence"] = _fields_dict(mission.geofence)
     data["scenario"] = _scenario_to_dict(mission.scenario)
+    if not mission.home_altitude_known:  # written as read: an unknown altitude must not become a known 0
+        del data["scenario"]["home"]["alt_m"]
     return data
 
 
@@ -407,7 +412,14 @@ def _mission(data: Any, base_dir: Path, default_name: str) -> Mission:
         if "geofence" in spec else None
     scenario = _scenario(spec["scenario"], "scenario", base_dir)
     details = {"geofence": f"geofence {_span(geofence)}, area {_span(scenario.area)}"} if geofence else {}
-    return _construct(Mission, "", details=details, scenario=scenario, flight=flight, name=name, geofence=geofence)
+    return _construct(Mission, "", details=details, scenario=scenario, flight=flight, name=name, geofence=geofence,
+                      home_altitude_known=_home_altitude_given(spec["scenario"]))
+
+
+def _home_altitude_given(scenario: Any) -> bool:
+    """False only for an inline scenario whose home leaves out alt_m (generated and dataset homes carry one)."""
+    home = scenario.get("home") if isinstance(scenario, Mapping) else None
+    return not isinstance(home, Mapping) or "alt_m" in home
 
 
 def _flight(value: Any, path: str) -> FlightSettings:

@@ -97,7 +97,7 @@ def test_sigkill_mid_replay_leaves_a_readable_tlog_and_a_partial_report(tmp_path
     save_mission(small_mission(max_steps=3000), mission)  # far longer than the test waits
     out = tmp_path / "out"
     process = subprocess.Popen([*HRLSAC, "mission", "replay", str(mission), "--policy", PRETRAINED, "--out", str(out),
-                                "--no-video", "--quiet"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                "--no-video", "--quiet", "--accept-flight-mismatch"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     tlog, report = out / "flight.tlog", out / "report.json"
     try:
         deadline = time.monotonic() + 120.0  # bounded: imports, then a few seconds of flying

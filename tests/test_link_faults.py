@@ -396,7 +396,7 @@ def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, 
     mission = tmp_path / "small.yaml"
     save_mission(small_mission(), mission)
     code = mission_cli.main(["replay", str(mission), "--policy", PRETRAINED, "--seed", "5", "--no-video",
-                             "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2"])
+                             "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2", "--accept-flight-mismatch"])
     assert code == 0
     out = capsys.readouterr().out
     assert ("  outcome: safe (vehicle: Failsafe: offboard setpoints lost for 1.0 s, switching to POSCTL); "

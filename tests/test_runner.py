@@ -273,7 +273,7 @@ def fly_against_sitl_process(policy, tmp_path: Path, *extra: str) -> tuple[subpr
     try:
         result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--policy", str(policy.path),
                                  "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out"),
-                                 *extra], capture_output=True, text=True, timeout=240)
+                                 "--accept-flight-mismatch", *extra], capture_output=True, text=True, timeout=240)
     finally:
         sitl.send_signal(signal.SIGINT)
         vehicle_log, _ = sitl.communicate(timeout=10)

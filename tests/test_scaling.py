@@ -284,7 +284,7 @@ def test_replay_with_workers_gives_the_serial_reports_and_tlogs(ray_instance, tm
     # Without MAVLINK20 in the environment, as a user's shell runs it (the test suite's conftest sets it).
     env = {key: value for key, value in os.environ.items() if key != "MAVLINK20"}
     base = [*HRLSAC, "mission", "replay", str(tmp_path / "small.yaml"), "--policy", str(PRETRAINED),
-            "--episodes", "3", "--seed", "4", "--no-video", "--quiet"]
+            "--episodes", "3", "--seed", "4", "--no-video", "--quiet", "--accept-flight-mismatch"]
     for name, extra in (("serial", []), ("processes", ["--workers", "2"])):
         subprocess.run([*base, "--out", str(tmp_path / name), *extra], check=True, timeout=300, cwd=ROOT, env=env)
     serial = replay_outputs(tmp_path / "serial")
