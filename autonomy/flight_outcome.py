@@ -8,7 +8,8 @@ is disarmed or has held position for a while, so the outcome includes what the a
 Outcomes:
 
 * ``completed``: the runner went through its states to "landed and disarmed" with no failsafe and no abort, and
-  the vehicle raised no failsafe of its own.
+  the vehicle raised no failsafe of its own that the runner did not resume the search from (a link-loss failsafe
+  followed by a resumption, autonomy.link_loss, is part of a completed search).
 * ``safe``: something went wrong (a runner failsafe or abort, a vehicle failsafe) but the vehicle ended landed and
   disarmed, returning (RTL), landing, or holding position (HOLD or POSCTL); ``reason`` says what went wrong first.
 * ``ditched``: the vehicle touched the surface farther than ``FlyawayLimits.home_radius_m`` from home, in any mode
@@ -118,6 +119,19 @@ class FlightWatch:
             return f"armed on the ground in {autopilot.mode.name}"
         return f"flying in {autopilot.mode.name} at {-state.down_m:.0f} m"
 
+    def unresumed_failsafes(self, report: dict) -> list[dict]:
+        """The vehicle's failsafes after which the runner did not resume the search (each resumption answers the
+        latest failsafe before it): a link-loss failsafe the search came back from does not spoil a completion."""
+        resumptions = [e["time_s"] for e in report["events"] if e["event"] == "resume"]
+        left = []
+        for failsafe in self.vehicle_failsafes:
+            answer = next((t for t in resumptions if t >= failsafe["time_s"]), None)
+            if answer is None:
+                left.append(failsafe)
+            else:
+                resumptions.remove(answer)
+        return left
+
     def outcome(self, report: dict) -> dict:
         """The outcome section of the mission report (see the module docstring)."""
         autopilot, state = self.vehicle.autopilot, self.vehicle.state
@@ -125,7 +139,8 @@ class FlightWatch:
         problems = [(e["time_s"], f"{e['event']}: {e['reason']}") for e in report["events"]
                     if e["event"] in ("failsafe", "abort")]
         problems = [text for _, text in sorted(problems + [(f["time_s"], f"vehicle: {f['reason']}")
-                                                           for f in self.vehicle_failsafes], key=lambda p: p[0])]
+                                                           for f in self.unresumed_failsafes(report)],
+                                               key=lambda p: p[0])]
         landed = not autopilot.armed and state.on_ground
         safe_end = landed or (autopilot.armed and autopilot.mode in HOLDING_MODES + RETURNING_MODES)
         if self.flyaway is not None:

@@ -146,6 +146,16 @@ class MavsdkLink:
     def armed(self) -> bool:
         return self._armed
 
+    @property
+    def autopilot(self) -> int:
+        """MAVSDK names modes and runs take-off and offboard itself, PX4-style, whatever the autopilot."""
+        return mavlink.MAV_AUTOPILOT_PX4
+
+    status_count = 0  # MAVSDK's status texts are not collected
+
+    def status_since(self, count: int) -> list:
+        return []
+
     def vehicle_description(self) -> str:
         return "autopilot found by MAVSDK"
 
@@ -162,10 +172,13 @@ class MavsdkLink:
         return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
-        """MAVSDK sets rates per telemetry topic, not per message: the runner asks only for positions."""
-        if message_id != mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            raise ValueError(f"the MAVSDK backend sets only the position rate, not message {message_id}")
-        self._call(self.telemetry.set_rate_position(rate_hz))
+        """MAVSDK sets rates per telemetry topic, not per message: only the position rate is set (MAVSDK asks for
+        the home position and battery itself)."""
+        if message_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            self._call(self.telemetry.set_rate_position(rate_hz))
+
+    def request_message(self, message_id: int) -> None:
+        """MAVSDK requests what its subscriptions need (the home position among them) itself."""
 
     def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
         """The runner's COMMAND_LONGs, as MAVSDK calls; the outcome arrives as a CommandAck."""

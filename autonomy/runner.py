@@ -2,6 +2,14 @@
 
     CONNECT -> PREFLIGHT -> ARM -> TAKEOFF -> OFFBOARD -> SEARCH -> RTL -> LAND -> DONE
                                                      (any failure or failsafe -> RTL, or DONE with the reason)
+                                      SEARCH -> OFFBOARD -> SEARCH   (resumed after the vehicle's link-loss failsafe)
+
+The autopilot is PX4 or ArduPilot Copter, told by the vehicle's HEARTBEAT (:mod:`autonomy.autopilots`): OFFBOARD is
+PX4's OFFBOARD or ArduPilot's GUIDED, and take-off, mode requests and failsafes follow the autopilot's own rules.
+Heights are above the vehicle's home (HOME_POSITION), and a mission whose launch point disagrees with that home is
+refused before arming (:mod:`autonomy.preflight`). A link outage during SEARCH holds the drone (zero velocity) and
+pauses decisions until telemetry is back; a mode change that the vehicle's own link-loss failsafe made is followed by
+a resumption of the search, a pilot's mode change ends it (:mod:`autonomy.link_loss`).
 
 Time belongs to a :class:`Clock`: in lockstep replay it is the simulated vehicle's (``advance`` steps the
 vehicle one physics tick), against a real vehicle it is the wall clock (``advance`` sleeps one tick). Every
@@ -10,138 +18,40 @@ stream send when due and checks the failsafes; the states' waits are loops of ti
 
 In SEARCH a decision is due every ``step_period_s``: the :class:`autonomy.search_pilot.SearchPilot` turns the
 filtered pose into the policy's action, the geofence guard may replace it, and the stream flies it. The policy
-runs in a :class:`DecisionWorker`: in real time a thread (a slow policy delays decisions, never setpoints); in
-lockstep synchronously, its answer released after ``compute_time_s`` of simulated time (0 unless a test makes a
-policy slow), so replays stay deterministic. Every transition and failsafe is recorded with its reason.
+runs in a :class:`autonomy.decision_worker.DecisionWorker` (a thread in real time, a simulated latency in lockstep).
+Every transition and failsafe is recorded with its reason.
 """
 from __future__ import annotations
 
 import math
-import threading
-import time
-from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Callable
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from autonomy.autopilots import PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
+from autonomy.clocks import Clock, WallClock
+from autonomy.decision_worker import DecisionWorker
 from autonomy.estimator import PoseEstimator
+from autonomy.geofence import guard_velocity
+from autonomy.link_loss import LinkLossMonitor
 from autonomy.preflight import describe_point, home_disagreement
+from autonomy.runner_config import RunnerConfig
 from autonomy.search_pilot import Decision, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
 from autonomy.vehicle_link import VehicleLink, enum_name
-from autonomy.vehicle_time import BootTimeConfig, BootTimeMap
+from autonomy.vehicle_time import BootTimeMap
 from missions.mission import Mission
-from missions.validation import check_fields
 
-OFFBOARD_MODE = (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0)  # PX4 main mode 6 = OFFBOARD
+__all__ = ["Clock", "MissionAborted", "MissionRunner", "RunnerConfig", "WallClock", "receive_telemetry"]
+
+HOME_REQUEST_PERIOD_S = 2.0  # HOME_POSITION is asked for again this often until it arrives (ArduPilot sends it
+# on request only)
 STATES = ("CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE")
-
-
-class Clock(Protocol):
-    def now(self) -> float: ...
-
-    def advance(self) -> None: ...
 
 
 class MissionAborted(RuntimeError):
     """A state could not complete (the reason is recorded and the runner returns home if it can)."""
-
-
-@dataclass(frozen=True)
-class RunnerConfig:
-    """Timing, limits and failsafe thresholds of the runner."""
-
-    stream: StreamConfig = field(default_factory=StreamConfig)
-    """The setpoint stream (rate, stale timeout, clamps); its horizontal clamp is set from the mission."""
-    offboard_lead_s: float = 1.2
-    """Setpoints streamed before OFFBOARD is requested (PX4 needs at least 1 s)."""
-    connect_timeout_s: float = 15.0
-    """Wait for the vehicle's first HEARTBEAT."""
-    preflight_timeout_s: float = 30.0
-    """Wait for a converged pose estimate and a home position."""
-    takeoff_timeout_s: float = 60.0
-    """Wait for the climb to the search altitude."""
-    land_timeout_s: float = 600.0
-    """Wait for the return, landing and disarm."""
-    command_timeout_s: float = 1.5
-    """Wait for one COMMAND_ACK before sending the command again."""
-    command_retries: int = 3
-    """Attempts per command before the runner gives up on it."""
-    telemetry_timeout_s: float = 3.0
-    """No vehicle message for this long = telemetry lost (failsafe)."""
-    link_recovery_s: float = 60.0
-    """The return command (RTL) is re-sent (every ``command_timeout_s``) for this long before the runner gives up:
-    after a telemetry loss or on a lossy link, a link that comes back within it still brings the vehicle home
-    (PX4 has no data-link-loss action by default)."""
-    policy_stall_rtl_s: float = 5.0
-    """No fresh policy decision for this long = policy stalled (failsafe: RTL)."""
-    failsafe_hold_s: float = 1.0
-    """After a non-finite action, zero velocity is streamed this long before RTL is requested."""
-    low_battery_pct: float = 20.0
-    """Battery remaining at or below this = return (failsafe: RTL)."""
-    fence_margin_m: float = 20.0
-    """The guard keeps the drone this far inside the geofence."""
-    fence_lookahead_s: float = 2.0
-    """The guard turns back when the commanded velocity would cross the margin within this time."""
-    altitude_gain: float = 0.5
-    """Vertical velocity per metre of altitude error (holds the search altitude above the vehicle's home)."""
-    home_tolerance_m: float = 50.0
-    """Largest horizontal distance between the mission's launch point and the vehicle's home (HOME_POSITION);
-    farther, and the mission is refused before arming (GPS homes agree within a few metres)."""
-    boot_time: BootTimeConfig = field(default_factory=BootTimeConfig)
-    """How the vehicle's time_boot_ms is mapped onto the runner's clock (autonomy.vehicle_time)."""
-    home_altitude_tolerance_m: float = 15.0
-    """Largest difference between the mission's home altitude (when the file gives it) and the vehicle's home
-    altitude, AMSL; more, and the mission is refused before arming (GPS altitude errs by a few metres)."""
-
-    def __post_init__(self) -> None:
-        check_fields(self, (("offboard_lead_s", 1.0, 10.0), ("connect_timeout_s", 0.1, 600.0),
-                            ("preflight_timeout_s", 0.1, 600.0), ("takeoff_timeout_s", 1.0, 600.0),
-                            ("land_timeout_s", 1.0, 3600.0), ("command_timeout_s", 0.05, 30.0),
-                            ("command_retries", 1, 20), ("telemetry_timeout_s", 0.5, 60.0),
-                            ("link_recovery_s", 0.0, 3600.0),
-                            ("policy_stall_rtl_s", 0.5, 120.0), ("failsafe_hold_s", 0.0, 30.0),
-                            ("low_battery_pct", 0.0, 100.0),
-                            ("fence_margin_m", 0.0, 500.0), ("fence_lookahead_s", 0.0, 30.0),
-                            ("altitude_gain", 0.01, 5.0), ("home_tolerance_m", 0.0, 10_000.0),
-                            ("home_altitude_tolerance_m", 0.0, 10_000.0)), integers=("command_retries",))
-
-
-class DecisionWorker:
-    """Runs ``pilot.decide`` off the control loop; ``threaded`` in real time, simulated latency in lockstep."""
-
-    def __init__(self, pilot: SearchPilot, threaded: bool, simulated_compute_s: float = 0.0):
-        self.pilot, self.threaded = pilot, threaded
-        self.compute_time_s = simulated_compute_s
-        self._pending: tuple[float, Decision] | None = None
-        self._thread: threading.Thread | None = None
-        self._result: Decision | None = None
-
-    @property
-    def busy(self) -> bool:
-        return self._pending is not None or (self._thread is not None and self._thread.is_alive())
-
-    def submit(self, position_ne: np.ndarray, now_s: float) -> None:
-        if self.threaded:
-            def work() -> None:
-                self._result = self.pilot.decide(position_ne)
-            self._thread = threading.Thread(target=work, name="policy", daemon=True)
-            self._thread.start()
-        else:
-            self._pending = (now_s + self.compute_time_s, self.pilot.decide(position_ne))
-
-    def poll(self, now_s: float) -> Decision | None:
-        """The finished decision, once (None while computing or idle)."""
-        if self.threaded:
-            if self._thread is not None and not self._thread.is_alive():
-                self._thread, result, self._result = None, self._result, None
-                return result
-            return None
-        if self._pending is not None and now_s + 1e-9 >= self._pending[0]:
-            decision, self._pending = self._pending[1], None
-            return decision
-        return None
 
 
 class MissionRunner:
@@ -161,6 +71,11 @@ class MissionRunner:
         self.streamer = SetpointStreamer(stream, link.send_velocity)
         self.worker = DecisionWorker(pilot, threaded_policy, simulated_policy_s)
         self.boot_time = BootTimeMap(config.boot_time)
+        self.flavour: AutopilotFlavour = PX4  # until the vehicle's heartbeat says otherwise
+        self.link_loss = LinkLossMonitor(config.link_loss, self.flavour)
+        self._texts_seen = 0
+        self._link_back_s = -math.inf  # when telemetry last came back after a silence (decisions restart then)
+        self._waiting_reported = False
         self.state: str | None = None
         self.transitions: list[dict] = []
         self.events: list[dict] = []
@@ -189,13 +104,27 @@ class MissionRunner:
         """One control tick: telemetry in, heartbeat and setpoints out. States call it while they wait."""
         self.clock.advance()
         receive_telemetry(self.link, self.estimator, self.boot_time)
-        self.streamer.tick(self.clock.now())
+        now = self.clock.now()
+        texts = self.link.status_since(self._texts_seen)
+        self._texts_seen = self.link.status_count
+        was_down = self.link_loss.link_down()
+        self.link_loss.observe(now, self.link.last_vehicle_message_s, texts)
+        if was_down and not self.link_loss.link_down():
+            self._link_back_s = now
+        self.streamer.tick(now)
 
-    def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str,
+                   repeat: tuple[float, Callable[[], None]] | None = None) -> None:
+        """Tick until ``condition()``; MissionAborted after ``timeout_s``. ``repeat``: (period, action) to run at
+        the start and then every period while waiting (asking again for something that may have been lost)."""
         end = self.clock.now() + timeout_s
+        next_repeat = self.clock.now()
         while not condition():
             if self.clock.now() > end:
                 raise MissionAborted(f"{what}: not within {timeout_s:g} s")
+            if repeat is not None and self.clock.now() + 1e-9 >= next_repeat:
+                repeat[1]()
+                next_repeat += repeat[0]
             self.tick()
 
     def command(self, command: int, *params: float, what: str, attempts: int | None = None,
@@ -244,12 +173,20 @@ class MissionRunner:
 
     def _connect(self) -> None:
         self.wait_until(lambda: self.link.discovered, self.config.connect_timeout_s, "waiting for the vehicle")
-        self._record("PREFLIGHT", self.link.vehicle_description())
+        try:
+            self.flavour = flavour_for(self.link.autopilot)
+        except UnsupportedAutopilot as exc:
+            raise MissionAborted(str(exc)) from None
+        self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour)
+        self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
         self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0)
 
     def _preflight(self) -> None:
+        ask_home = (HOME_REQUEST_PERIOD_S, lambda: self.link.home_position() is None
+                    and self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION))
         self.wait_until(lambda: self.estimator.converged and self.link.home_position() is not None,
-                        self.config.preflight_timeout_s, "waiting for a converged position estimate and home")
+                        self.config.preflight_timeout_s, "waiting for a converged position estimate and home",
+                        repeat=ask_home)
         home = self.link.home_position()
         problem = home_disagreement(self.mission, home, self.config.home_tolerance_m,
                                     self.config.home_altitude_tolerance_m)
@@ -260,32 +197,48 @@ class MissionRunner:
                                    f"vehicle's home ({describe_point(home)}), the search area assumed at its level")
         self._record("ARM", "pose estimate converged, home known")
 
+    def _set_mode(self, mode: str) -> None:
+        """MAV_CMD_DO_SET_MODE for ``mode`` (the autopilot's own numbers), done once the heartbeat shows it."""
+        self.command(mavlink.MAV_CMD_DO_SET_MODE, *self.flavour.mode_params(mode), what=f"switching to {mode}",
+                     took_effect=lambda: self.link.flight_mode == mode)
+        self.wait_until(lambda: self.link.flight_mode == mode, 3.0, f"{mode} in the heartbeat")
+
     def _arm_and_take_off(self) -> None:
+        flavour, height = self.flavour, self.mission.flight.altitude_m
+        if flavour.arm_mode is not None and self.link.flight_mode != flavour.arm_mode:
+            self._set_mode(flavour.arm_mode)  # ArduPilot: arm and take off in GUIDED
         self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming", took_effect=lambda: self.link.armed)
         self._record("TAKEOFF", "armed")
-        target_amsl = self.link.home_altitude_amsl() + self.mission.flight.altitude_m
-        self.command(mavlink.MAV_CMD_NAV_TAKEOFF, math.nan, 0, 0, math.nan, math.nan, math.nan, target_amsl,
-                     what="takeoff", took_effect=lambda: self.link.flight_mode == "TAKEOFF")
-        self.wait_until(lambda: self._height_m() >= self.mission.flight.altitude_m - 1.5
-                        and self.link.flight_mode != "TAKEOFF", self.config.takeoff_timeout_s,
-                        f"climbing to {self.mission.flight.altitude_m:g} m")
+        # Without a take-off mode (ArduPilot) a lost ACK shows as the climb itself.
+        started = (lambda: self.link.flight_mode == flavour.takeoff_mode) if flavour.takeoff_mode else \
+            (lambda: self._height_m() > 1.0)
+        self.command(mavlink.MAV_CMD_NAV_TAKEOFF, *flavour.takeoff_params(self.link.home_altitude_amsl(), height),
+                     what="takeoff", took_effect=started)
+        self.wait_until(lambda: self._height_m() >= height - 1.5 and self.link.flight_mode != flavour.takeoff_mode,
+                        self.config.takeoff_timeout_s, f"climbing to {height:g} m")
         self._record("OFFBOARD", f"at {self._height_m():.1f} m above home")
 
     def _offboard(self) -> None:
-        self.streamer.start(self.clock.now(), HOLD)
-        started = self.clock.now()
+        if self.streamer.running:  # resuming: the stream never stopped
+            self.streamer.command(HOLD, self.clock.now())
+        else:
+            self.streamer.start(self.clock.now(), HOLD)
+        started, sent = self.clock.now(), self.streamer.sent
         self.wait_until(lambda: self.clock.now() - started >= self.config.offboard_lead_s, 10.0, "setpoint lead")
-        self.command(mavlink.MAV_CMD_DO_SET_MODE, *OFFBOARD_MODE, what="switching to OFFBOARD",
-                     took_effect=lambda: self.link.flight_mode == "OFFBOARD")
-        self.wait_until(lambda: self.link.flight_mode == "OFFBOARD", 3.0, "OFFBOARD in the heartbeat")
-        self._record("SEARCH", f"OFFBOARD after {self.streamer.sent} setpoints")
+        mode = self.flavour.companion_mode
+        self._set_mode(mode)
+        self._record("SEARCH", f"{mode} after {self.streamer.sent - sent} setpoints")
 
     def _search(self) -> None:
         period = self.mission.flight.step_period_s
         next_decision = self.clock.now()
         while self.search_end is None:
             now = self.clock.now()
-            if now + 1e-9 >= next_decision and not self.worker.busy:
+            if self.link_loss.link_down():  # no pose to act on: stop, and decide again once telemetry is back
+                if self.streamer.latest != HOLD:
+                    self.streamer.command(HOLD, now)
+                    self._event("link", f"no telemetry for {self.config.link_loss.gap_s:g} s: holding position")
+            elif now + 1e-9 >= next_decision and not self.worker.busy:
                 pose = self.estimator.predict_to(now)
                 self.trajectory.append((round(now, 3), float(pose.position_ned[0]), float(pose.position_ned[1])))
                 self.worker.submit(pose.position_ned[:2].copy(), now)
@@ -295,7 +248,7 @@ class MissionRunner:
                 if next_decision <= now:
                     next_decision = now + period
             decision = self.worker.poll(now)
-            if decision is not None:
+            if decision is not None and not self.link_loss.link_down():
                 self._apply(decision, now)
             self._check_failsafes(now)
             if self.search_end is None:
@@ -328,41 +281,68 @@ class MissionRunner:
     def _check_failsafes(self, now: float) -> None:
         if self.search_end is not None:
             return
-        last = self.link.last_vehicle_message_s
-        if last is not None and now - last > self.config.telemetry_timeout_s:
-            self._event("failsafe", f"telemetry lost for {now - last:.1f} s")
+        last, waiting = self.link.last_vehicle_message_s, self.config.link_loss
+        silent_s = now - last if last is not None else 0.0
+        resumed_s = max(self._last_decision_s, self.transitions[-1]["time_s"], self._link_back_s)
+        mode, companion = self.link.flight_mode, self.flavour.companion_mode
+        if silent_s > self.config.telemetry_timeout_s:
+            if waiting.resume and silent_s <= waiting.wait_s:
+                if not self._waiting_reported:
+                    self._waiting_reported = True
+                    self._event("link", f"telemetry lost for {silent_s:.1f} s: waiting up to {waiting.wait_s:g} s "
+                                        "for it to come back")
+                return
+            self._event("failsafe", f"telemetry lost for {silent_s:.1f} s")
             self.search_end = "telemetry lost"
-        elif now - max(self._last_decision_s, self.transitions[-1]["time_s"]) > self.config.policy_stall_rtl_s:
+            return
+        self._waiting_reported = False
+        if self.link_loss.link_down():
+            return  # holding until telemetry is back: the checks below need a live link
+        if now - resumed_s > self.config.policy_stall_rtl_s:
             self._event("failsafe", f"no policy decision for {self.config.policy_stall_rtl_s:g} s: RTL")
             self.search_end = "policy stalled"
         elif (battery := self.link.battery_percent()) is not None and battery <= self.config.low_battery_pct:
             self._event("failsafe", f"battery at {battery:g} %: RTL")
             self.search_end = "low battery"
-        elif self.link.flight_mode != "OFFBOARD":
-            self._event("failsafe", f"the vehicle left OFFBOARD (now {self.link.flight_mode})")
-            self.search_end = f"vehicle switched to {self.link.flight_mode}"
+        elif mode != companion:
+            evidence = self.link_loss.failsafe_evidence(now, mode)
+            if evidence is not None and self.link_loss.may_resume():
+                self._resume(mode, evidence)
+                return
+            used_up = f"; {evidence}, but no resumption is left" if evidence is not None else ""
+            self._event("failsafe", f"the vehicle left {companion} (now {mode}){used_up}")
+            self.search_end = f"vehicle switched to {mode}"
+
+    def _resume(self, mode: str, evidence: str) -> None:
+        """After the vehicle's own link-loss failsafe: stream again, ask for the companion mode again and carry on
+        searching from the same search state (the pilot keeps it)."""
+        self.link_loss.resumptions += 1
+        limit = self.config.link_loss.max_resumptions
+        self._event("resume", f"the vehicle's link-loss failsafe switched it to {mode} ({evidence}): resuming the "
+                              f"search ({self.link_loss.resumptions} of {limit})")
+        self._record("OFFBOARD", f"resuming after the vehicle's failsafe to {mode}")
+        # The link may still be half down (an uplink outage: the vehicle refuses the switch until setpoints arrive
+        # again): keep asking, within the link-loss wait.
+        give_up = self.clock.now() + self.config.link_loss.wait_s
+        while True:
+            try:
+                self._offboard()
+                return
+            except MissionAborted as exc:
+                if self.clock.now() + self.config.offboard_lead_s > give_up or \
+                        self.link.flight_mode not in self.flavour.failsafe_modes:
+                    raise
+                self._event("resume-retry", f"not yet ({exc}): trying again")
 
     def _fence_guard(self, vn: float, ve: float, now: float) -> tuple[float, float]:
-        """Stop and turn back before the geofence: cancel any velocity component that would cross the margin
-        within the lookahead, and head back inside when already beyond it. Judged from the pose predicted to
-        ``now`` (the last fused telemetry is up to a message period old)."""
-        fence, margin = self.mission.fence, self.config.fence_margin_m
+        """The command after the geofence guard (autonomy.geofence), judged from the pose predicted to ``now``."""
         north, east = self.estimator.predict_to(now).position_ned[:2]
-        ahead = self.config.fence_lookahead_s
-        guarded = []
-        for v, pos, low, high in ((vn, north, fence.north_min_m + margin, fence.north_max_m - margin),
-                                  (ve, east, fence.east_min_m + margin, fence.east_max_m - margin)):
-            if pos < low:
-                v = max(v, 0.0) or 1.0  # turn back inside
-            elif pos > high:
-                v = min(v, 0.0) or -1.0
-            elif not low <= pos + v * ahead <= high:
-                v = 0.0
-            guarded.append(v)
-        if (guarded[0], guarded[1]) != (vn, ve):
+        guarded = guard_velocity(vn, ve, north, east, self.mission.fence, self.config.fence_margin_m,
+                                 self.config.fence_lookahead_s)
+        if guarded != (vn, ve):
             self._event("geofence", f"command ({vn:.1f}, {ve:.1f}) m/s changed to ({guarded[0]:.1f}, "
                                     f"{guarded[1]:.1f}) m/s at ({north:.0f}, {east:.0f}) m")
-        return guarded[0], guarded[1]
+        return guarded
 
     def _height_m(self) -> float:
         """Filtered height above the vehicle's home (HOME_POSITION), 0 before any estimate.
@@ -431,6 +411,8 @@ class MissionRunner:
             "transitions": self.transitions,
             "failsafes": [e for e in self.events if e["event"] == "failsafe"],
             "events": self.events,
+            "autopilot": self.flavour.name,
+            "resumptions": self.link_loss.resumptions,
             "estimator": self.estimator.counters(),
             "vehicle_time": {"offset_s": self.boot_time.offset_s, "timeline_changes": self.boot_time.timeline_changes,
                              "last_change": self.boot_time.last_change, "ignored": self.boot_time.ignored},
@@ -453,23 +435,3 @@ def receive_telemetry(link: VehicleLink, estimator: PoseEstimator, boot_time: Bo
                 estimator.restart(boot_time.last_change)
             estimator.update_global_position_int(msg, time_s)
     return messages
-
-
-class WallClock:
-    """Real time for flights against a real (or real-time simulated) vehicle: ``advance`` sleeps one tick."""
-
-    def __init__(self, tick_s: float = 0.01):
-        self.tick_s = tick_s
-        self._start = time.monotonic()
-        self._next = self._start
-
-    def now(self) -> float:
-        return time.monotonic() - self._start
-
-    def advance(self) -> None:
-        self._next += self.tick_s
-        delay = self._next - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-        else:
-            self._next = time.monotonic()

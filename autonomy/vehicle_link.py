@@ -94,6 +94,9 @@ class VehicleLink:
     last_vehicle_message_s: float | None = None
     acks: deque = field(default_factory=lambda: deque(maxlen=64))
     status_texts: list[str] = field(default_factory=list)
+    status_log: deque = field(default_factory=lambda: deque(maxlen=MAX_STATUS_TEXTS))
+    """(receive time, text) of the latest STATUSTEXTs; ``status_count`` counts all ever received."""
+    status_count: int = 0
     sent_heartbeats: int = 0
     signing_key: bytes | None = field(default=None, repr=False)
     """MAVLink 2 signing secret (32 bytes); None: send unsigned, accept everything."""
@@ -188,6 +191,8 @@ class VehicleLink:
         elif msg.get_type() == "STATUSTEXT":
             self.status_texts.append(msg.text)
             del self.status_texts[:-MAX_STATUS_TEXTS]
+            self.status_log.append((now, msg.text))
+            self.status_count += 1
         return True
 
     def _forget_pymavlink_state(self, msg) -> None:
@@ -211,9 +216,21 @@ class VehicleLink:
 
     @property
     def flight_mode(self) -> str | None:
-        """PX4 mode name of the latest HEARTBEAT ("OFFBOARD", "RTL", ...), None before one arrived."""
+        """Mode name of the latest HEARTBEAT as pymavlink spells it for its autopilot ("OFFBOARD", "LOITER", "RTL",
+        ... for PX4; "GUIDED", "RTL", "BRAKE", ... for ArduPilot Copter), None before one arrived."""
         beat = self.latest.get("HEARTBEAT")
-        return None if beat is None else mavutil.interpret_px4_mode(beat.base_mode, beat.custom_mode)
+        return None if beat is None else mavutil.mode_string_v10(beat)
+
+    @property
+    def autopilot(self) -> int | None:
+        """The vehicle's MAV_AUTOPILOT (from its first HEARTBEAT), None before discovery."""
+        beat = self.latest.get("HEARTBEAT")
+        return None if beat is None else beat.autopilot
+
+    def status_since(self, count: int) -> list[tuple[float, str]]:
+        """The (time, text) STATUSTEXTs received after the first ``count`` (at most the last MAX_STATUS_TEXTS)."""
+        new = min(self.status_count - count, len(self.status_log))
+        return list(self.status_log)[len(self.status_log) - new:] if new > 0 else []
 
     @property
     def armed(self) -> bool:
@@ -262,6 +279,10 @@ class VehicleLink:
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
         self.send_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, 1e6 / rate_hz))
+
+    def request_message(self, message_id: int) -> None:
+        """MAV_CMD_REQUEST_MESSAGE: send ``message_id`` once (HOME_POSITION, which ArduPilot does not stream)."""
+        self.send_command(mavlink.MAV_CMD_REQUEST_MESSAGE, (message_id,))
 
     def send_velocity(self, command: VelocityCommand, now_s: float) -> None:
         del now_s  # the stream's schedule; the message carries our boot time

@@ -20,6 +20,7 @@ from autonomy import mission_cli
 from autonomy import replay as replay_module
 from autonomy.flight_outcome import FlyawayLimits
 from autonomy.policy import Policy, load_policy
+from autonomy.link_loss import LinkLossConfig
 from autonomy.runner import RunnerConfig
 from autonomy.replay import airframe_for, replay_mission, start_point
 from conftest import free_udp_ports
@@ -289,35 +290,70 @@ def test_a_half_second_outage_is_ridden_through(policy):
     assert 0.5 <= report["outcome"]["longest_offboard_setpoint_gap_s"] < 1.0  # under PX4's 1 s COM_OF_LOSS_T
 
 
-def test_a_two_second_outage_trips_the_vehicles_failsafe_then_the_runner_returns_home(policy):
+def resumed(report: dict) -> list[str]:
+    return [e["reason"] for e in report["events"] if e["event"] == "resume"]
+
+
+def test_a_two_second_outage_trips_the_vehicles_failsafe_and_the_runner_resumes_the_search(policy):
     report = fly(policy, "outage=25:2")
     outcome = report["outcome"]
-    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "landed and disarmed"
     assert [f["reason"] for f in outcome["vehicle_failsafes"]] == [
         "Failsafe: offboard setpoints lost for 1.0 s, switching to POSCTL"]
-    assert outcome["reason"] == "vehicle: Failsafe: offboard setpoints lost for 1.0 s, switching to POSCTL"
-    assert [f["reason"] for f in report["failsafes"]] == ["the vehicle left OFFBOARD (now POSCTL)"]
-    assert report["search_end"] == "vehicle switched to POSCTL" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
+    assert resumed(report) == ["the vehicle's link-loss failsafe switched it to POSCTL (the link was lost for 2.1 s "
+                               "from 24.9 s): resuming the search (1 of 3)"]
+    assert states(report) == ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "OFFBOARD", "SEARCH",
+                              "RTL", "LAND", "DONE"]
+    assert report["failsafes"] == [] and report["search_end"] == "step limit" and report["resumptions"] == 1
+    assert outcome["outcome"] == "completed" and outcome["vehicle_end"] == "landed and disarmed"
 
 
-def test_a_ten_second_outage_trips_both_failsafes_and_the_return_goes_through_once_the_link_is_back(policy):
+def test_a_ten_second_outage_is_waited_out_and_the_search_resumed_once_the_link_is_back(policy):
     report = fly(policy, "outage=25:10")
     outcome = report["outcome"]
-    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "landed and disarmed"
     assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.96, abs=0.02)
+    links = [(e["time_s"], e["reason"]) for e in report["events"] if e["event"] == "link"]
+    assert links == [(pytest.approx(25.9, abs=0.1), "no telemetry for 1 s: holding position"),
+                     (pytest.approx(27.9, abs=0.1), "telemetry lost for 3.0 s: waiting up to 60 s for it to come back")]
+    (resume,) = [e for e in report["events"] if e["event"] == "resume"]
+    assert 35.0 <= resume["time_s"] <= 35.5  # as soon as the link is back at 35 s
+    assert report["failsafes"] == [] and not [e for e in report["events"] if e["event"] == "abort"]
+    assert outcome["outcome"] == "completed" and report["search_end"] == "step limit"
+
+
+def test_without_resumption_an_outage_ends_the_search_and_the_return_goes_through_once_the_link_is_back(policy):
+    report = fly(policy, "outage=25:10", runner=RunnerConfig(link_loss=LinkLossConfig(resume=False)))
+    outcome = report["outcome"]
+    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "landed and disarmed"
     assert [f["reason"] for f in report["failsafes"]] == ["telemetry lost for 3.0 s"]
-    assert not [e for e in report["events"] if e["event"] == "abort"]
     # the return command is re-sent through the outage (link_recovery_s) and accepted after it ends at 35 s
     rtl, land = (next(t for t in report["transitions"] if t["to"] == state) for state in ("RTL", "LAND"))
     assert rtl["time_s"] == pytest.approx(28.0, abs=0.1) and 35.0 <= land["time_s"] <= 36.6
-    assert states(report)[-3:] == ["RTL", "LAND", "DONE"]
+    assert states(report)[-3:] == ["RTL", "LAND", "DONE"] and resumed(report) == []
 
 
 def test_the_runner_gives_up_on_the_return_after_link_recovery_s_and_the_vehicle_holds(policy):
-    report = fly(policy, "outage=25:10", runner=RunnerConfig(link_recovery_s=3.0))
+    report = fly(policy, "outage=25:10", runner=RunnerConfig(link_recovery_s=3.0,
+                                                            link_loss=LinkLossConfig(resume=False)))
     assert report["outcome"]["vehicle_end"] == "flying in POSCTL at 20 m"
     aborts = [e["reason"] for e in report["events"] if e["event"] == "abort"]
     assert aborts == ["return to launch: no COMMAND_ACK for MAV_CMD_NAV_RETURN_TO_LAUNCH after 3 attempts"]
+
+
+def test_a_link_that_never_comes_back_ends_the_search_after_the_wait(policy):
+    report = fly(policy, "outage=25:200", runner=RunnerConfig(link_recovery_s=3.0,
+                                                             link_loss=LinkLossConfig(wait_s=20.0)))
+    assert [f["reason"] for f in report["failsafes"]] == ["telemetry lost for 20.0 s"]
+    assert report["search_end"] == "telemetry lost" and resumed(report) == []
+
+
+def test_resumptions_are_bounded(policy):
+    report = fly(policy, "outage=22:2,outage=30:2,outage=38:2",
+                 runner=RunnerConfig(link_loss=LinkLossConfig(max_resumptions=2)))
+    assert len(resumed(report)) == 2 and report["resumptions"] == 2
+    (last,) = [f["reason"] for f in report["failsafes"]]
+    assert last.startswith("the vehicle left OFFBOARD (now POSCTL); the link was lost for 2.1 s from 37.9 s, "
+                           "but no resumption is left")
+    assert report["search_end"] == "vehicle switched to POSCTL" and report["outcome"]["outcome"] == "safe"
 
 
 class AckSwallowingLink:
@@ -349,26 +385,62 @@ def test_commands_whose_acks_are_all_lost_count_as_done_once_the_heartbeat_shows
 
 
 @pytest.mark.parametrize("action, mode", [(0, "POSCTL"), (3, "RTL"), (4, "LAND")])
-def test_the_vehicles_offboard_loss_failsafe_acts_when_only_the_setpoints_are_cut(policy, action, mode):
+def test_when_only_the_setpoints_are_cut_the_vehicles_announcement_lets_the_runner_resume(policy, action, mode):
+    """Telemetry keeps flowing, so the runner sees no silence: the vehicle's STATUSTEXT says what happened."""
     report = fly(policy, "up.outage=25:3", vehicle_params={"COM_OBL_RC_ACT": action})
     outcome = report["outcome"]
-    assert [f["reason"] for f in outcome["vehicle_failsafes"]] == [
-        f"Failsafe: offboard setpoints lost for 1.0 s, switching to {mode}"]
+    text = f"Failsafe: offboard setpoints lost for 1.0 s, switching to {mode}"
+    assert [f["reason"] for f in outcome["vehicle_failsafes"]] == [text]
     assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.0 + 1.0, abs=0.05)
-    assert [f["reason"] for f in report["failsafes"]] == [f"the vehicle left OFFBOARD (now {mode})"]
-    assert outcome["outcome"] == "safe" and outcome["vehicle_end"] == "landed and disarmed"
+    (resume,) = resumed(report)  # quoting the vehicle's STATUSTEXT that named the failsafe
+    assert resume.startswith(f"the vehicle's link-loss failsafe switched it to {mode} (the vehicle announced it: ")
+    assert resume.endswith("): resuming the search (1 of 3)") and "failsafe" in resume.lower()
     assert report["link_packets"]["down"]["outage"] == 0  # telemetry kept flowing: only the vehicle's failsafe
+    assert outcome["outcome"] == "completed" and outcome["vehicle_end"] == "landed and disarmed"
 
 
-def test_the_runners_telemetry_loss_failsafe_acts_when_only_the_telemetry_is_cut(policy):
+def test_when_only_the_telemetry_is_cut_the_runner_holds_then_carries_on(policy):
     report = fly(policy, "down.outage=25:5")
     outcome = report["outcome"]
-    assert [f["reason"] for f in report["failsafes"]] == ["telemetry lost for 3.0 s"]
-    assert report["failsafes"][0]["time_s"] == pytest.approx(25.0 + 3.0, abs=0.1)
-    assert report["search_end"] == "telemetry lost" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
-    assert outcome["vehicle_failsafes"] == []  # the setpoints kept flowing: the vehicle had no reason to act
-    assert outcome["outcome"] == "safe" and outcome["reason"] == "failsafe: telemetry lost for 3.0 s"
-    assert outcome["vehicle_end"] == "landed and disarmed"
+    links = [e["reason"] for e in report["events"] if e["event"] == "link"]
+    assert links == ["no telemetry for 1 s: holding position",
+                     "telemetry lost for 3.0 s: waiting up to 60 s for it to come back"]
+    assert outcome["vehicle_failsafes"] == [] and report["failsafes"] == []  # the hold setpoints kept flowing
+    assert resumed(report) == [] and report["search_end"] == "step limit"
+    assert outcome["outcome"] == "completed" and outcome["vehicle_end"] == "landed and disarmed"
+
+
+class PilotAtTheGroundStation:
+    """The vehicle's end of the link, plus a ground station (system 255) that switches the vehicle to POSCTL at
+    ``at_s``: a pilot taking over while the companion's link is fine. Its COMMAND_LONG is real MAVLink bytes."""
+
+    def __init__(self, link, clock, at_s: float):
+        self.link, self.clock, self.at_s, self.sent = link, clock, at_s, False
+        self.gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=mavlink.MAV_COMP_ID_MISSIONPLANNER)
+
+    def send(self, data: bytes) -> None:
+        self.link.send(data)
+
+    def receive(self) -> list[bytes]:
+        received = self.link.receive()
+        if not self.sent and self.clock() >= self.at_s:
+            self.sent = True
+            msg = self.gcs.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                                               mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 3, 0, 0, 0, 0, 0)
+            received.append(bytes(msg.pack(self.gcs)))
+        return received
+
+    def counts(self) -> dict:
+        return {"pilot_commands": int(self.sent)}
+
+
+def test_a_pilots_mode_change_ends_the_search_even_with_resumption_on(policy, monkeypatch):
+    monkeypatch.setattr(replay_module, "apply_faults",
+                        lambda links, faults, clock, seed: [PilotAtTheGroundStation(links[0], clock, 30.0)])
+    report = fly(policy, "")
+    assert resumed(report) == [] and report["link_packets"] == {"pilot_commands": 1}
+    assert [f["reason"] for f in report["failsafes"]] == ["the vehicle left OFFBOARD (now POSCTL)"]
+    assert report["search_end"] == "vehicle switched to POSCTL" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
 
 
 def test_a_vehicle_without_a_working_failsafe_is_caught_as_a_flyaway(policy):
@@ -399,8 +471,7 @@ def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, 
                              "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2", "--accept-flight-mismatch"])
     assert code == 0
     out = capsys.readouterr().out
-    assert ("  outcome: safe (vehicle: Failsafe: offboard setpoints lost for 1.0 s, switching to POSCTL); "
-            "vehicle landed and disarmed") in out
+    assert "  outcome: completed (search ended: step limit); vehicle landed and disarmed" in out
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["link_faults"] == "both ways outage=25:2" and report["complete"] is True
-    assert report["outcome"]["outcome"] == "safe"
+    assert report["outcome"]["outcome"] == "completed" and report["resumptions"] == 1
