@@ -42,11 +42,12 @@ class Endpoint:
         self.mav.send(msg)
 
     def parse(self, data: bytes) -> list[mavlink.MAVLink_message]:
-        """The messages in one received datagram. Links carry whole frames per datagram (UDP, the memory link),
-        so bytes left over are a damaged frame: dropped and counted, never allowed to swallow the next datagram
-        (a garbage header claiming 255 bytes would otherwise eat the following valid command)."""
+        """The messages in one received chunk. Datagram links carry whole frames per datagram (UDP, the memory
+        link), so bytes left over are a damaged frame: dropped and counted, never allowed to swallow the next
+        datagram (a garbage header claiming 255 bytes would otherwise eat the following valid command). On a
+        stream link (TCP) a frame may continue in the next chunk, so the rest is kept."""
         messages = self.mav.parse_buffer(data) or []
-        if self.mav.buf_len():
+        if self.mav.buf_len() and not getattr(self.link, "stream", False):
             self.bad_frames += 1
             self.mav.buf, self.mav.buf_index = bytearray(), 0
             self.mav.expected_length = mavlink.HEADER_LEN_V1 + 2
