@@ -2,81 +2,52 @@
 
 No I/O and no MAVLink encoding here: the vehicle hands decoded commands and setpoints in, and asks
 :meth:`Autopilot.guidance` for the velocity command the dynamics should fly this tick. What PX4 does and
-why we copy it is noted where it matters; ``docs/sitl.md`` lists the differences.
+why we copy it is noted where it matters; ``docs/sitl.md`` lists the differences and the PX4 sources checked.
 """
 from __future__ import annotations
 
 import math
-from collections import Counter
-from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_bridge.autopilot_base import (
+    ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
+    MASK_YAW_RATE, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent, FlightStatus, Setpoint, as_int,
+    body_to_ned)
 from sitl_bridge.dynamics import HOVER, MultirotorParams, VehicleState, VelocityCommand, velocity_toward
 from sitl_bridge.params import ParameterStore
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4_modes import FlightMode, base_mode
 
-ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
-DENIED = mavlink.MAV_RESULT_DENIED
-UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
-FAILED = mavlink.MAV_RESULT_FAILED
+__all__ = ["ACCEPTED", "DENIED", "FAILED", "TEMPORARILY_REJECTED", "UNSUPPORTED", "Autopilot", "AutopilotEvent",
+           "Setpoint", "as_int"]
 
 FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: arm/disarm without checks
-# Offboard proof of life: PX4 wants setpoints at > 2 Hz (no gap over 0.5 s) for 1 s before the switch.
-STREAM_MAX_GAP_S = 0.5
-STREAM_MIN_DURATION_S = 1.0
-ARRIVED_RADIUS_M = 0.3
-
-# SET_POSITION_TARGET_LOCAL_NED.type_mask bits (POSITION_TARGET_TYPEMASK)
-MASK_POSITION = 0b111
-MASK_VELOCITY = 0b111000
-MASK_ACCELERATION = 0b111000000
-MASK_YAW = 1024
-MASK_YAW_RATE = 2048
-
-def as_int(value: float, default: int = -1) -> int:
-    """A command parameter as an integer; NaN/inf (MAVSDK sends NaN for unused params) become ``default``."""
-    return int(value) if math.isfinite(value) else default
-
+MISSION_PLANNER_COMPONENT = 190  # PX4 prints "Switching to ... not available" only for DO_SET_MODE from this one
+REJECT_PRINT_INTERVAL_S = 1.0  # ... and at most once a second (Commander::printRejectMode)
+FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0, official release
+# The capabilities we really have (PX4 claims more: missions, FTP, ...; we do not implement those).
+CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
 
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
+PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
+                 FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
 
 
-@dataclass(frozen=True)
-class Setpoint:
-    """An accepted offboard setpoint, already in local NED."""
-
-    time_s: float
-    is_velocity: bool  # else a position
-    north: float
-    east: float
-    down: float
-    yaw_rad: float | None = None
-    yaw_rate_rad_s: float | None = None
-
-
-@dataclass(frozen=True)
-class AutopilotEvent:
-    """Something worth telling the operator (STATUSTEXT) and the log."""
-
-    time_s: float
-    text: str
-    severity: int = mavlink.MAV_SEVERITY_INFO
-
-
-class Autopilot:
+class Autopilot(AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
+    PARAMS_BYTEWISE = True
+    MAV_AUTOPILOT = mavlink.MAV_AUTOPILOT_PX4
+    CAPABILITIES = CAPABILITIES
+    FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
+
     def __init__(self, params: ParameterStore, airframe: MultirotorParams, home_alt_m: float):
-        self.params = params
-        self.airframe = airframe
+        super().__init__(params, airframe)
         self.home_alt_m = home_alt_m  # AMSL; NAV_TAKEOFF's param7 is an AMSL altitude in PX4
-        self.armed = False
         self.mode = FlightMode.HOLD
-        self.gps_ok = False  # set by the vehicle from the sensors; required to arm
-        self.events: list[AutopilotEvent] = []
-        self.state_changed = False  # a mode or arming change the vehicle must announce at once
         self.hold_target: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.takeoff_alt_m = 0.0
         self.rtl_landing = False
@@ -84,22 +55,36 @@ class Autopilot:
         self.has_flown = False
         self.ground_since_s: float | None = None
         self.battery_failsafe = ""
-        self.zoom_percent = 0.0
-        # offboard stream bookkeeping
-        self.setpoint: Setpoint | None = None
-        self.stream_start_s: float | None = None
-        self.setpoints_accepted = 0
-        self.setpoints_ignored: Counter[str] = Counter()
+        self._last_reject_print_s = -math.inf
 
-    # ----------------------------------------------------------------- bookkeeping helpers
-    def _event(self, now: float, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> None:
-        self.events.append(AutopilotEvent(now, text, severity))
+    # ----------------------------------------------------------------- what the vehicle reports
+    def offboard_signal_lost(self, now: float) -> bool:
+        """PX4's offboard "proof of life" (OffboardChecks::checkAndReport): the last setpoint is older than
+        COM_OF_LOSS_T, or there is none, or the local position/velocity it needs is invalid (no GPS here).
+        The same rule refuses the switch into OFFBOARD and triggers the offboard-loss failsafe."""
+        last = self.setpoint.time_s if self.setpoint is not None else -math.inf
+        return now - last > self.params["COM_OF_LOSS_T"] or not self.gps_ok
 
-    def stream_ok(self, now: float) -> bool:
-        """Have offboard setpoints arrived at > 2 Hz for at least 1 s, up to now?"""
-        return (self.setpoint is not None and self.stream_start_s is not None
-                and now - self.setpoint.time_s <= STREAM_MAX_GAP_S
-                and now - self.stream_start_s >= STREAM_MIN_DURATION_S)
+    def heartbeat_fields(self) -> tuple[int, int, int, int]:
+        status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
+        return self.MAV_AUTOPILOT, base_mode(self.mode, self.armed), self.mode.custom_mode, status
+
+    def battery_charge_state(self, fraction: float) -> int:
+        if fraction <= self.params["BAT_EMERGEN_THR"]:
+            return mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
+        if fraction <= self.params["BAT_CRIT_THR"]:
+            return mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
+        return mavlink.MAV_BATTERY_CHARGE_STATE_OK
+
+    @property
+    def status(self) -> FlightStatus:
+        phase = PHASE_OF_MODE[self.mode]
+        if self.mode is FlightMode.RTL and self.rtl_landing:
+            phase = "landing"
+        if not self.armed or (self.ground_since_s is not None and phase in ("holding", "landing")):
+            phase = "on_ground"
+        return FlightStatus(self.armed, self.mode.name, phase, self.setpoint.time_s if self.setpoint else None,
+                            self.params["COM_OF_LOSS_T"])
 
     def landed_state(self, state: VehicleState) -> int:
         """MAV_LANDED_STATE for EXTENDED_SYS_STATE."""
@@ -120,10 +105,16 @@ class Autopilot:
         return None
 
     # ----------------------------------------------------------------- modes and arming
-    def set_mode(self, mode: FlightMode, now: float, state: VehicleState, reason: str) -> int:
-        """Switch mode as PX4's commander would; returns a MAV_RESULT."""
-        if mode is FlightMode.OFFBOARD and self.mode is not FlightMode.OFFBOARD and not self.stream_ok(now):
-            self._event(now, "Switching to Offboard is not possible: no setpoint stream", mavlink.MAV_SEVERITY_WARNING)
+    def set_mode(self, mode: FlightMode, now: float, state: VehicleState, reason: str,
+                 source_component: int | None = None) -> int:
+        """Switch mode as PX4's commander would; returns a MAV_RESULT. ``source_component``: the requester's
+        MAVLink component for external requests (None: the autopilot's own switch, e.g. a failsafe)."""
+        if mode is FlightMode.OFFBOARD and self.mode is not FlightMode.OFFBOARD and self.offboard_signal_lost(now):
+            # Commander: the mode cannot run (offboard_control_signal_lost), DO_SET_MODE gets TEMPORARILY_REJECTED
+            # and printRejectMode() tells a ground station (component 190) once a second.
+            if source_component == MISSION_PLANNER_COMPONENT and now - self._last_reject_print_s > REJECT_PRINT_INTERVAL_S:
+                self._last_reject_print_s = now
+                self._event(now, "Switching to Offboard is currently not available", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         if mode is self.mode:
             return ACCEPTED
@@ -168,10 +159,12 @@ class Autopilot:
         return ACCEPTED
 
     # ----------------------------------------------------------------- commands
-    def handle_command(self, command: int, p: tuple[float, ...], now: float, state: VehicleState) -> int:
+    def handle_command(self, command: int, p: tuple[float, ...], now: float, state: VehicleState,
+                       source_component: int = MISSION_PLANNER_COMPONENT, frame: int | None = None) -> int:
         """Execute one MAV_CMD with params p[0..6] (= param1..param7); returns a MAV_RESULT.
 
-        Repeating a command (a retransmission) gives the same result and no second effect.
+        Repeating a command (a retransmission) gives the same result and no second effect. ``frame`` (of a
+        COMMAND_INT) is not used by PX4's handling of the emulated commands.
         """
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             force = as_int(p[1]) == FORCE_MAGIC
@@ -196,7 +189,7 @@ class Autopilot:
                 return DENIED
             if mode is FlightMode.TAKEOFF:
                 self.takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
-            return self.set_mode(mode, now, state, "DO_SET_MODE")
+            return self.set_mode(mode, now, state, "DO_SET_MODE", source_component)
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
         return UNSUPPORTED
@@ -218,15 +211,12 @@ class Autopilot:
             return ACCEPTED
         return self.set_mode(FlightMode.TAKEOFF, now, state, f"NAV_TAKEOFF to {target:.1f} m")
 
-    def _zoom(self, zoom_type: int, value: float, now: float) -> int:
-        if zoom_type == mavlink.ZOOM_TYPE_RANGE and 0.0 <= value <= 100.0:
-            self.zoom_percent = value
-        elif zoom_type == mavlink.ZOOM_TYPE_STEP and math.isfinite(value):
-            self.zoom_percent = min(100.0, max(0.0, self.zoom_percent + 10.0 * value))
-        else:
-            return DENIED
-        self._event(now, f"camera zoom {self.zoom_percent:.0f} %")
-        return ACCEPTED
+    def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:
+        """SET_MODE: PX4 turns it into DO_SET_MODE internally and sends no ACK for the message."""
+        mode = FlightMode.from_custom_mode(custom_mode)
+        if mode is not None and base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            self.set_mode(mode, now, state, "SET_MODE")
+        return None
 
     # ----------------------------------------------------------------- offboard setpoints
     def handle_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
@@ -247,14 +237,11 @@ class Autopilot:
             return False
         north, east, down = values
         if frame == mavlink.MAV_FRAME_BODY_NED:  # x forward, y right: rotate by the current heading
-            c, s = math.cos(state.yaw_rad), math.sin(state.yaw_rad)
-            north, east = c * north - s * east, s * north + c * east
+            north, east = body_to_ned(north, east, state.yaw_rad)
             if not is_velocity:  # a body-frame position is an offset from where the vehicle is now
                 north, east, down = north + state.north_m, east + state.east_m, down + state.down_m
         if is_velocity:
             north, east, down = self._clamp_velocity(north, east, down)
-        if self.setpoint is None or now - self.setpoint.time_s > STREAM_MAX_GAP_S:
-            self.stream_start_s = now
         self.setpoint = Setpoint(now, is_velocity, north, east, down,
                                  yaw if use_yaw else None,
                                  self._clamp_yaw_rate(yaw_rate) if use_rate else None)
@@ -341,16 +328,17 @@ class Autopilot:
 
     def _rtl_command(self, state: VehicleState) -> VelocityCommand:
         """Climb to RTL_RETURN_ALT if lower, fly home at MPC_XY_CRUISE, then land there."""
+        home_n, home_e, _ = self.home_ned
         if self.rtl_landing or state.on_ground:
-            return self._landing_command(state, 0.0, 0.0)
+            return self._landing_command(state, home_n, home_e)
         return_down = min(state.down_m, -self.params["RTL_RETURN_ALT"])
         if state.down_m - return_down > ARRIVED_RADIUS_M:  # still climbing
             return velocity_toward(state, state.north_m, state.east_m, return_down, self.airframe,
                                    speed_xy_mps=0.0, speed_z_mps=self.params["MPC_Z_VEL_MAX_UP"])
-        if math.hypot(state.north_m, state.east_m) < 1.0:
+        if math.hypot(state.north_m - home_n, state.east_m - home_e) < 1.0:
             self.rtl_landing = True
-            return self._landing_command(state, 0.0, 0.0)
-        return velocity_toward(state, 0.0, 0.0, state.down_m, self.airframe, speed_xy_mps=self.params["MPC_XY_CRUISE"])
+            return self._landing_command(state, home_n, home_e)
+        return velocity_toward(state, home_n, home_e, state.down_m, self.airframe, speed_xy_mps=self.params["MPC_XY_CRUISE"])
 
     def _auto_disarm(self, now: float, state: VehicleState) -> None:
         if not state.on_ground:
@@ -366,13 +354,12 @@ class Autopilot:
             self.disarm(now, state, force=False, reason=f"auto-disarm: {why}")
 
     def _check_failsafes(self, now: float, state: VehicleState) -> None:
-        if self.mode is FlightMode.OFFBOARD:
+        if self.mode is FlightMode.OFFBOARD and self.offboard_signal_lost(now):
             last = self.setpoint.time_s if self.setpoint else -math.inf
-            if now - last > self.params["COM_OF_LOSS_T"]:
-                action = FAILSAFE_MODES.get(int(self.params["COM_OBL_RC_ACT"]), FlightMode.HOLD)
-                self._event(now, f"Failsafe: offboard setpoints lost for {now - last:.1f} s, "
-                                 f"switching to {action.name}", mavlink.MAV_SEVERITY_CRITICAL)
-                self.set_mode(action, now, state, "offboard loss failsafe")
+            action = FAILSAFE_MODES.get(int(self.params["COM_OBL_RC_ACT"]), FlightMode.HOLD)
+            why = f"offboard setpoints lost for {now - last:.1f} s" if self.gps_ok else "no position estimate"
+            self._event(now, f"Failsafe: {why}, switching to {action.name}", mavlink.MAV_SEVERITY_CRITICAL)
+            self.set_mode(action, now, state, "offboard loss failsafe")
         if state.on_ground:
             return
         fraction = state.battery_wh / self.airframe.battery_capacity_wh

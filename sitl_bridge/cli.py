@@ -1,7 +1,8 @@
-"""``hrlsac sitl``: run the simulated PX4-like multirotor and wait for MAVLink clients."""
+"""``hrlsac sitl``: run the simulated multirotor (a PX4 or ArduPilot Copter autopilot) and wait for MAVLink clients."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import signal
 import sys
 import time
@@ -12,7 +13,8 @@ from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.dynamics import Wind
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
-from sitl_bridge.vehicle import DEFAULT_HOME, VehicleConfig
+from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile
+from sitl_bridge.vehicle import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
 
 FAILSAFE_ACTIONS = {"hold": 5, "posctl": 0, "land": 4, "rtl": 3}
 
@@ -21,6 +23,9 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     home = parser.add_argument_group("vehicle")
+    home.add_argument("--autopilot", choices=AUTOPILOT_TYPES, default="px4",
+                      help="autopilot personality: PX4 (OFFBOARD, PX4 SITL ports) or ArduPilot Copter (GUIDED, "
+                           "ArduPilot SITL ports)")
     home.add_argument("--home", default=f"{DEFAULT_HOME.lat_deg},{DEFAULT_HOME.lon_deg},{DEFAULT_HOME.alt_m}",
                       help="home as LAT,LON,ALT (degrees, degrees, metres AMSL)")
     home.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
@@ -28,21 +33,37 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
     home.add_argument("--rate", type=float, default=100.0, help="physics ticks per simulated second (>= 100)")
     home.add_argument("--wind", default="0,0", help="steady wind as NORTH,EAST in m/s (the air's velocity)")
     home.add_argument("--gusts", type=float, default=0.0, help="gust amplitude in m/s")
-    home.add_argument("--failsafe", choices=sorted(FAILSAFE_ACTIONS), default="posctl",
-                      help="offboard-loss action (COM_OBL_RC_ACT); posctl holds position")
+    home.add_argument("--failsafe", choices=sorted(FAILSAFE_ACTIONS), default=None,
+                      help="PX4 offboard-loss action (COM_OBL_RC_ACT; default posctl: position hold); for ArduPilot "
+                           "use --param FS_GCS_ENABLE=... and GUID_TIMEOUT")
     home.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                      help="set a PX4 parameter at boot (repeatable)")
-    ports = parser.add_argument_group("links")
+                      help="set a parameter of the autopilot at boot (repeatable)")
+    home.add_argument("--telemetry-profile", choices=PROFILES, default="default",
+                      help="default stream rates: default (legacy for PX4, ardupilot for ArduPilot), legacy, px4 "
+                           "(onboard mode on the API link, normal on the GCS link), px4_sitl, ardupilot (nothing "
+                           "but HEARTBEAT until requested)")
+    home.add_argument("--boot-time", type=float, default=0.0, metavar="S",
+                      help="the autopilot booted this many seconds before the simulation (time_boot_ms starts there)")
+    home.add_argument("--reboot-at", type=float, default=None, metavar="S",
+                      help="reboot the autopilot at this simulated time (airborne, the vehicle falls)")
+    home.add_argument("--reboot-downtime", type=float, default=5.0, metavar="S",
+                      help="seconds the autopilot stays silent while it reboots")
+    ports = parser.add_argument_group("links (defaults: PX4 SITL's, or for --autopilot ardupilot TCP 5760, "
+                                      "GCS 14560 -> 14550, companion 14561 -> 14551)")
     ports.add_argument("--host", default="127.0.0.1", help="address to bind and to send to")
-    ports.add_argument("--api-port", type=udp_port, default=14580, help="local port of the API/offboard link")
-    ports.add_argument("--api-remote", type=udp_port, default=14540, help="port the API link sends to (MAVSDK)")
-    ports.add_argument("--gcs-port", type=udp_port, default=18570, help="local port of the ground-station link")
-    ports.add_argument("--gcs-remote", type=udp_port, default=14550, help="port the GCS link sends to; 0 disables it")
+    ports.add_argument("--api-port", type=udp_port, default=None, help="local port of the API/companion link")
+    ports.add_argument("--api-remote", type=udp_port, default=None,
+                       help="port the API/companion link sends to (PX4: 14540 for MAVSDK; ArduPilot: 14551)")
+    ports.add_argument("--gcs-port", type=udp_port, default=None, help="local port of the ground-station link")
+    ports.add_argument("--gcs-remote", type=udp_port, default=None,
+                       help="port the GCS link sends to (14550); 0 disables it")
+    ports.add_argument("--tcp-port", type=udp_port, default=None,
+                       help="TCP server port (ArduPilot SERIAL0, 5760; PX4: none); 0 disables it")
     parser.add_argument("--signing-key", metavar="FILE", default=None,
                         help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything, reject unsigned, "
                              "wrongly signed and replayed messages except PX4's unsigned allow-list")
     ports.add_argument("--link-faults", metavar="SPEC", default=None,
-                       help="inject link faults on the wall clock (seeded by --seed): " + SPEC_HELP)
+                       help="inject link faults on the UDP links, wall clock (seeded by --seed): " + SPEC_HELP)
     parser.add_argument("--quiet", action="store_true", help="do not log commands and mode changes")
     return parser
 
@@ -71,7 +92,12 @@ def _floats(text: str, count: int, what: str) -> list[float]:
 def config_from_args(args: argparse.Namespace) -> VehicleConfig:
     lat, lon, alt = _floats(args.home, 3, "--home")
     wind_north, wind_east = _floats(args.wind, 2, "--wind")
-    params = {"COM_OBL_RC_ACT": FAILSAFE_ACTIONS[args.failsafe]}
+    params: dict[str, float] = {}
+    if args.failsafe is not None:
+        if args.autopilot != "px4":
+            raise ValueError("--failsafe sets PX4's COM_OBL_RC_ACT; for ArduPilot use --param FS_GCS_ENABLE=N "
+                             "(and GUID_TIMEOUT)")
+        params["COM_OBL_RC_ACT"] = FAILSAFE_ACTIONS[args.failsafe]
     for item in args.param:
         name, sep, value = item.partition("=")
         if not sep:
@@ -80,14 +106,26 @@ def config_from_args(args: argparse.Namespace) -> VehicleConfig:
     key = load_key_file(args.signing_key) if args.signing_key else None
     return VehicleConfig(home=GeoPoint(lat, lon, alt), seed=args.seed, physics_rate_hz=args.rate,
                          wind=Wind(north_mps=wind_north, east_mps=wind_east, gust_mps=args.gusts, seed=args.seed),
-                         params=params, signing_key=key)
+                         params=params, signing_key=key, autopilot=args.autopilot,
+                         telemetry_profile=args.telemetry_profile, boot_time_s=args.boot_time,
+                         reboot_at_s=args.reboot_at, reboot_downtime_s=args.reboot_downtime)
+
+
+def ports_from_args(args: argparse.Namespace) -> UdpPorts:
+    """The personality's default ports, with the ones given on the command line (0 disables GCS and TCP)."""
+    ports = UdpPorts.for_autopilot(args.autopilot, args.host)
+    given = {"api_port": args.api_port, "api_remote_port": args.api_remote, "gcs_port": args.gcs_port,
+             "gcs_remote_port": args.gcs_remote, "tcp_port": args.tcp_port}
+    given = {name: (None if value == 0 and name in ("gcs_remote_port", "tcp_port") else value)
+             for name, value in given.items() if value is not None}
+    return dataclasses.replace(ports, **given)
 
 
 def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
     args = build_parser(prog).parse_args(argv)
     try:
         config = config_from_args(args)
-        ports = UdpPorts(args.host, args.api_port, args.api_remote, args.gcs_port, args.gcs_remote or None)
+        ports = ports_from_args(args)
 
         def log(event: AutopilotEvent) -> None:
             if not args.quiet:
@@ -98,21 +136,7 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
     except (ValueError, OSError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
-    home = config.home
-    print(f"Simulated PX4 multirotor (sysid {config.system_id}) at {home.lat_deg:.6f}, {home.lon_deg:.6f}, "
-          f"{home.alt_m:.1f} m AMSL; {args.speed:g}x real time, seed {args.seed}")
-    print(f"  API link  udp {args.host}:{args.api_port} -> {args.host}:{args.api_remote}"
-          f"   MAVSDK: udpin://0.0.0.0:{args.api_remote}   pymavlink: udpin:0.0.0.0:{args.api_remote}"
-          f" or udpout:{args.host}:{args.api_port}")
-    if ports.gcs_remote_port:
-        print(f"  GCS link  udp {args.host}:{args.gcs_port} -> {args.host}:{args.gcs_remote}"
-              f"   QGroundControl / MAVProxy: --master=udpin:0.0.0.0:{args.gcs_remote}")
-    if config.signing_key is not None:
-        print(f"  MAVLink 2 signing on (key {args.signing_key}): unsigned messages accepted only for "
-              "HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION")
-    if faults is not None:
-        print(f"  link faults: {faults.describe()} (wall clock from start)")
-    print("Ctrl-C stops.", flush=True)
+    print_connections(config, ports, server, args)
     # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and Python then
     # installs no KeyboardInterrupt handler: install it, and treat SIGTERM (service managers, kill) the same.
     signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -131,3 +155,41 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
         print(f"{prog}: error: {server.error}", file=sys.stderr)
         return 1
     return 0
+
+
+def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleServer, args: argparse.Namespace) -> None:
+    """What runs, and the connection string of every link for the usual clients."""
+    home, host = config.home, ports.host
+    name = "ArduPilot Copter" if config.autopilot == "ardupilot" else "PX4"
+    print(f"Simulated {name} multirotor (sysid {config.system_id}) at {home.lat_deg:.6f}, {home.lon_deg:.6f}, "
+          f"{home.alt_m:.1f} m AMSL; {args.speed:g}x real time, seed {args.seed}")
+    ardupilot = config.autopilot == "ardupilot"
+    for index, link in enumerate(server.links):
+        streams = f" (SR{index}_*)" if ardupilot else ""
+        if link.name == "tcp":
+            print(f"  SERIAL0   tcp {host}:{ports.tcp_port}{streams}   MAVProxy: --master=tcp:{host}:{ports.tcp_port}"
+                  f"   pymavlink: tcp:{host}:{ports.tcp_port}")
+        elif link.name == "gcs":
+            print(f"  GCS link  udp {host}:{ports.gcs_port} -> {host}:{ports.gcs_remote_port}{streams}"
+                  f"   QGroundControl / MAVProxy: --master=udpin:0.0.0.0:{ports.gcs_remote_port}")
+        else:
+            label = "companion" if ardupilot else "API link "
+            print(f"  {label} udp {host}:{ports.api_port} -> {host}:{ports.api_remote_port}{streams}"
+                  f"   MAVSDK: udpin://0.0.0.0:{ports.api_remote_port}   pymavlink / mission run: "
+                  f"udpin:0.0.0.0:{ports.api_remote_port} or udpout:{host}:{ports.api_port}")
+    profile = resolve_profile(config.telemetry_profile, config.autopilot)
+    if profile == "ardupilot":
+        print("  telemetry: ArduPilot defaults (SRn_* = 0): only HEARTBEAT until a client sends REQUEST_DATA_STREAM "
+              "or MAV_CMD_SET_MESSAGE_INTERVAL")
+    else:
+        print(f"  telemetry profile: {profile}")
+    if config.boot_time_s or config.reboot_at_s is not None:
+        reboot = f", reboots at {config.reboot_at_s:g} s for {config.reboot_downtime_s:g} s" \
+            if config.reboot_at_s is not None else ""
+        print(f"  autopilot booted {config.boot_time_s:g} s before the start{reboot}")
+    if config.signing_key is not None:
+        print(f"  MAVLink 2 signing on (key {args.signing_key}): unsigned messages accepted only for "
+              "HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION")
+    if args.link_faults:
+        print(f"  link faults: {parse_link_faults(args.link_faults).describe()} (UDP links, wall clock from start)")
+    print("Ctrl-C stops.", flush=True)

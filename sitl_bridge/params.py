@@ -1,8 +1,10 @@
-"""The simulated autopilot's parameters: a small subset of PX4's, with PX4's names and encoding.
+"""The simulated autopilot's parameters: the store, and the PX4 subset (names, defaults, encoding).
 
 PX4 sends integer parameters "bytewise": the int32's four bytes are put in PARAM_VALUE.param_value
 (a float field) unchanged, and it announces MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE in
 AUTOPILOT_VERSION. We do the same so that clients written for PX4 decode our integers correctly.
+ArduPilot sends every parameter as its float value (its table is in :mod:`sitl_bridge.ardupilot_params`);
+which encoding a vehicle uses is its autopilot's ``PARAMS_BYTEWISE``.
 """
 from __future__ import annotations
 
@@ -14,14 +16,17 @@ from pymavlink.dialects.v20 import common as mavlink
 
 REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
 INT32 = mavlink.MAV_PARAM_TYPE_INT32
+INT16 = mavlink.MAV_PARAM_TYPE_INT16
+INT8 = mavlink.MAV_PARAM_TYPE_INT8
+INTEGER_KINDS = (INT8, INT16, INT32)
 
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: its PX4 name, type, default, allowed range and meaning."""
+    """One parameter: its autopilot's name, type, default, allowed range and meaning."""
 
     name: str
-    kind: int  # REAL32 or INT32
+    kind: int  # REAL32, INT8, INT16 or INT32 (MAV_PARAM_TYPE)
     default: float
     minimum: float
     maximum: float
@@ -65,25 +70,36 @@ READ_ONLY = frozenset({"MAV_SYS_ID"})
 
 def encode_bytewise(value: float, kind: int) -> float:
     """The float that carries ``value`` in PARAM_VALUE / PARAM_SET (int32 bytes reinterpreted)."""
-    if kind == INT32:
+    if kind in INTEGER_KINDS:
         return struct.unpack("<f", struct.pack("<i", int(value)))[0]
     return float(value)
 
 
 def decode_bytewise(wire_value: float, kind: int) -> float:
     """Inverse of :func:`encode_bytewise`."""
-    if kind == INT32:
+    if kind in INTEGER_KINDS:
         return float(struct.unpack("<i", struct.pack("<f", wire_value))[0])
+    return float(wire_value)
+
+
+def decode_float(wire_value: float, kind: int) -> float:
+    """A PARAM_SET value as ArduPilot reads it (AP_Param::set_float): integers get 0.01 added, then truncated,
+    so that 2.9999 sent for 3 stores 3."""
+    if kind in INTEGER_KINDS and math.isfinite(wire_value):
+        return float(int(wire_value + 0.01))
     return float(wire_value)
 
 
 class ParameterStore:
     """Values by name, in a fixed order (the PARAM_VALUE index), with validation on set."""
 
-    def __init__(self, overrides: dict[str, float] | None = None):
-        self.specs = {spec.name: spec for spec in PARAM_SPECS}
-        self.names = [spec.name for spec in PARAM_SPECS]
-        self._values = {spec.name: float(spec.default) for spec in PARAM_SPECS}
+    def __init__(self, overrides: dict[str, float] | None = None, specs: tuple[ParamSpec, ...] = PARAM_SPECS,
+                 read_only: frozenset[str] = READ_ONLY):
+        """``specs``: the personality's table (PX4's by default); ``read_only``: names PARAM_SET may not change."""
+        self.specs = {spec.name: spec for spec in specs}
+        self.names = [spec.name for spec in specs]
+        self.read_only = read_only
+        self._values = {spec.name: float(spec.default) for spec in specs}
         for name, value in (overrides or {}).items():
             error = self.check(name, value)
             if error:
@@ -105,7 +121,7 @@ class ParameterStore:
             return f"{name}: value must be finite, got {value}"
         if not spec.minimum <= value <= spec.maximum:
             return f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}]"
-        if spec.kind == INT32 and value != int(value):
+        if spec.kind in INTEGER_KINDS and value != int(value):
             return f"{name}: must be an integer, got {value:g}"
         if spec.allowed and int(value) not in spec.allowed:
             return f"{name}: {int(value)} is not implemented here (allowed: {', '.join(map(str, spec.allowed))})"
@@ -114,7 +130,7 @@ class ParameterStore:
     def set(self, name: str, value: float) -> str | None:
         """Store a value; returns the reason it was refused (value unchanged), or None."""
         error = self.check(name, value)
-        if error is None and name in READ_ONLY:
+        if error is None and name in self.read_only:
             error = f"{name} is read-only"
         if error is None:
             self._values[name] = float(value)

@@ -18,6 +18,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_bridge.ardupilot_modes import CopterMode
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
@@ -93,17 +94,26 @@ class LockstepPilot:
         ack = self.wait_message("COMMAND_ACK", timeout_s, lambda m: m.command == command)
         return ack.result
 
-    def set_mode(self, mode: FlightMode) -> int:
+    def set_mode(self, mode: FlightMode | CopterMode) -> int:
+        """DO_SET_MODE as each autopilot wants it: PX4 (main, sub) in param2/3, ArduCopter the number in param2."""
+        custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if isinstance(mode, CopterMode):
+            return self.command(mavlink.MAV_CMD_DO_SET_MODE, custom, int(mode))
         main, sub = mode.value
-        return self.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
+        return self.command(mavlink.MAV_CMD_DO_SET_MODE, custom, main, sub)
 
     def set_param(self, name: str, value: float, timeout_s: float = 1.0) -> float:
         self.mav.param_set_send(1, 1, name.encode(), value, mavlink.MAV_PARAM_TYPE_REAL32)
         return self.wait_message("PARAM_VALUE", timeout_s, lambda m: m.param_id == name).param_value
 
-    def heartbeat_mode(self) -> FlightMode | None:
-        beats = [m for m in self.received if m.get_type() == "HEARTBEAT"]
-        return FlightMode.from_custom_mode(beats[-1].custom_mode) if beats else None
+    def heartbeat_mode(self) -> FlightMode | CopterMode | None:
+        """The mode of the last HEARTBEAT, decoded for the autopilot it names (None: none yet, or not emulated)."""
+        beat = next((m for m in reversed(self.received) if m.get_type() == "HEARTBEAT"), None)
+        if beat is None:
+            return None
+        if beat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+            return CopterMode(beat.custom_mode) if beat.custom_mode in CopterMode._value2member_map_ else None
+        return FlightMode.from_custom_mode(beat.custom_mode)
 
     def local_position(self):
         return next((m for m in reversed(self.received) if m.get_type() == "LOCAL_POSITION_NED"), None)
@@ -122,7 +132,7 @@ def fly_demo(seed: int = 0, say: Callable[[str], None] = print) -> dict:
     pilot.wait_for(lambda: pilot.heartbeat_mode() is FlightMode.HOLD and not v.state.on_ground, 30.0, "takeoff")
     say(f"  climbed to {-v.state.down_m:.1f} m")
     pilot.stream = (0.0, 0.0, 0.0, mavlink.MAV_FRAME_LOCAL_NED)
-    _fly(pilot, 1.2)  # PX4 wants setpoints for at least 1 s before it accepts OFFBOARD
+    _fly(pilot, 1.2)  # stream before asking for OFFBOARD (good practice; PX4 only needs one recent setpoint)
     results["offboard"] = pilot.set_mode(FlightMode.OFFBOARD)
     start = (v.state.north_m, v.state.east_m)
     pilot.stream = (3.0, 0.0, 0.0, mavlink.MAV_FRAME_LOCAL_NED)

@@ -1,8 +1,13 @@
-"""Running the simulated vehicle in real time over UDP, PX4-SITL style.
+"""Running the simulated vehicle in real time over UDP (and TCP), PX4-SITL or ArduPilot-SITL style.
 
 PX4 SITL opens two MAVLink instances: the API/offboard link (local port 14580, sending to 14540, where
 MAVSDK listens with ``udpin://0.0.0.0:14540``) and the GCS link (local port 18570, sending to 14550, where
 QGroundControl and MAVProxy listen). We do the same; each link also answers any peer that writes to it.
+
+ArduPilot's SITL binary serves MAVLink on TCP 5760 (SERIAL0), and sim_vehicle.py starts MAVProxy on it with
+``--out 127.0.0.1:14550 --out 127.0.0.1:14551`` (a ground station and a companion script listen there). The
+ArduPilot personality's closest equivalent (:meth:`UdpPorts.for_autopilot`): TCP 5760, and two UDP links that
+send to 14550 (GCS) and 14551 (companion) themselves, from local ports 14560 and 14561.
 """
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from missions.signing import wall_timestamp
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.clock import WallClock
 from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now
-from sitl_bridge.link import UdpLink
+from sitl_bridge.link import TcpServerLink, UdpLink
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
 
@@ -32,25 +37,45 @@ class UdpPorts:
     """Local port of the ground-station link."""
     gcs_remote_port: int | None = 14550
     """Where the GCS link sends (QGroundControl / MAVProxy default); None disables the GCS link."""
+    tcp_port: int | None = None
+    """A TCP server port (ArduPilot SITL's SERIAL0 is 5760); None: no TCP link."""
+
+    @classmethod
+    def for_autopilot(cls, autopilot: str, host: str = "127.0.0.1") -> "UdpPorts":
+        """The default ports of a personality: PX4 SITL's, or the ArduPilot SITL equivalent described above."""
+        if autopilot == "ardupilot":
+            return cls(host, api_port=14561, api_remote_port=14551, gcs_port=14560, gcs_remote_port=14550,
+                       tcp_port=5760)
+        return cls(host)
 
 
 class VehicleServer:
-    """A :class:`SimulatedVehicle` ticking in real time (times ``speed``) over UDP, in a thread or the foreground."""
+    """A :class:`SimulatedVehicle` ticking in real time (times ``speed``) over UDP/TCP, in a thread or the foreground."""
 
     def __init__(self, config: VehicleConfig | None = None, ports: UdpPorts = UdpPorts(), speed: float = 1.0,
                  on_event: Callable[[AutopilotEvent], None] | None = None, link_faults: LinkFaults | None = None):
-        """``link_faults``: injected on every link, timed on the wall clock from now, seeded by the vehicle's seed
-        (plus the link's index) unless they carry their own seed."""
+        """``link_faults``: injected on every UDP link, timed on the wall clock from now, seeded by the vehicle's
+        seed (plus the link's index) unless they carry their own seed. Link order (ArduPilot's SRn_ index, the
+        signing link id): API then GCS without a TCP port (PX4), else TCP, GCS, API (ArduPilot)."""
         self.clock = WallClock(speed)
-        self.links = [UdpLink("api", (ports.host, ports.api_port), (ports.host, ports.api_remote_port))]
-        if ports.gcs_remote_port is not None:
-            try:
-                self.links.append(UdpLink("gcs", (ports.host, ports.gcs_port), (ports.host, ports.gcs_remote_port)))
-            except OSError:
-                self.links[0].close()
-                raise
+        order = ("tcp", "gcs", "api") if ports.tcp_port is not None else ("api", "gcs")
+        self.links: list[UdpLink | TcpServerLink] = []
+        try:
+            for name in order:
+                if name == "tcp":
+                    self.links.append(TcpServerLink("tcp", (ports.host, ports.tcp_port)))
+                elif name == "gcs" and ports.gcs_remote_port is not None:
+                    self.links.append(UdpLink("gcs", (ports.host, ports.gcs_port), (ports.host, ports.gcs_remote_port)))
+                elif name == "api":
+                    self.links.append(UdpLink("api", (ports.host, ports.api_port), (ports.host, ports.api_remote_port)))
+        except OSError:
+            for link in self.links:
+                link.close()
+            raise
         seed = (config or VehicleConfig()).seed
-        self.faulty_links = apply_faults(self.links, link_faults, wall_clock_since_now(), seed)
+        udp = [link for link in self.links if not link.stream]
+        faulty = iter(apply_faults(udp, link_faults, wall_clock_since_now(), seed))
+        self.faulty_links = [link if link.stream else next(faulty) for link in self.links]
         # Real clients (pymavlink, MAVSDK, QGroundControl) sign with the wall clock: so must we.
         self.vehicle = SimulatedVehicle(config, self.faulty_links, on_event=on_event,
                                         signing_timestamp=wall_timestamp)

@@ -1,9 +1,10 @@
-"""Telemetry: which messages the vehicle streams, how often, and how each is filled.
+"""Telemetry: how each message is filled, and the per-link schedule that says when it is due.
 
-Rates follow PX4's defaults for a normal MAVLink instance closely enough for MAVSDK, MAVProxy and
-QGroundControl; every one can be changed per link with MAV_CMD_SET_MESSAGE_INTERVAL. Builders read the
-*sensor* values (noisy GPS, baro, attitude), never the simulator's ground truth, as a real autopilot's
-estimate would be.
+Which messages stream at which default rate is the vehicle's telemetry profile
+(:mod:`sitl_bridge.telemetry_profiles`); every one can be changed per link with MAV_CMD_SET_MESSAGE_INTERVAL.
+Builders read the *sensor* values (noisy GPS, baro, attitude), never the simulator's ground truth, as a real
+autopilot's estimate would be. What differs between PX4 and ArduPilot (HEARTBEAT fields, battery state,
+AUTOPILOT_VERSION) is asked of the autopilot personality; times are the autopilot's time since boot.
 """
 from __future__ import annotations
 
@@ -12,30 +13,13 @@ from typing import TYPE_CHECKING, Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.px4_modes import base_mode
+from sitl_bridge.autopilot_base import CELL_COUNT, CELL_NOMINAL_V, battery_voltage_v
+from sitl_bridge.telemetry_profiles import LEGACY_RATES_HZ
 
 if TYPE_CHECKING:  # the vehicle imports this module
     from sitl_bridge.vehicle import SimulatedVehicle
 
-DEFAULT_RATES_HZ: dict[int, float] = {
-    mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 10.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: 10.0,
-    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    mavlink.MAVLINK_MSG_ID_VFR_HUD: 2.0,
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
-}
-
-# The capabilities we really have (PX4 claims more: missions, FTP, ...; we do not implement those).
-CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
-FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0, official release
+DEFAULT_RATES_HZ = LEGACY_RATES_HZ  # the name older code imports
 
 SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
@@ -45,7 +29,6 @@ SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR
            | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
            | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
 
-CELL_COUNT = 4  # a 4S LiPo: 3.5 V (empty) to 4.2 V (full) per cell
 UINT16_MAX = 65535
 
 
@@ -84,10 +67,8 @@ def _deg_e7(value_deg: float) -> int:
 
 
 def heartbeat(v: SimulatedVehicle) -> mavlink.MAVLink_message:
-    ap = v.autopilot
-    status = mavlink.MAV_STATE_ACTIVE if ap.armed else mavlink.MAV_STATE_STANDBY
-    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
-                                             base_mode(ap.mode, ap.armed), ap.mode.custom_mode, status, 3)
+    autopilot, base_mode, custom_mode, status = v.autopilot.heartbeat_fields()
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, autopilot, base_mode, custom_mode, status, 3)
 
 
 def sys_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
@@ -104,7 +85,7 @@ def sys_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
 def battery_reading(v: SimulatedVehicle) -> tuple[float, float, float]:
     """(voltage V, current A, remaining fraction) from the dynamics' energy and power."""
     fraction = max(0.0, v.state.battery_wh / v.config.airframe.battery_capacity_wh)
-    volts = CELL_COUNT * (3.5 + 0.7 * fraction)
+    volts = battery_voltage_v(fraction)
     return volts, v.power_w / volts, fraction
 
 
@@ -112,16 +93,12 @@ def battery_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
     volts, amps, fraction = battery_reading(v)
     capacity_wh = v.config.airframe.battery_capacity_wh
     used_wh = capacity_wh - v.state.battery_wh
-    charge = mavlink.MAV_BATTERY_CHARGE_STATE_OK
-    if fraction <= v.autopilot.params["BAT_EMERGEN_THR"]:
-        charge = mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
-    elif fraction <= v.autopilot.params["BAT_CRIT_THR"]:
-        charge = mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
+    charge = v.autopilot.battery_charge_state(fraction)
     remaining_s = int(v.state.battery_wh * 3600 / v.power_w) if v.power_w > 1.0 else 0
     return mavlink.MAVLink_battery_status_message(
         0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767,
         [int(volts * 1000)] + [UINT16_MAX] * 9, int(amps * 100),
-        int(used_wh / (CELL_COUNT * 3.7) * 1000), int(used_wh * 36), int(round(fraction * 100)),
+        int(used_wh / (CELL_COUNT * CELL_NOMINAL_V) * 1000), int(used_wh * 36), int(round(fraction * 100)),
         remaining_s, charge, [0, 0, 0, 0], 0, 0)
 
 
@@ -137,8 +114,9 @@ def global_position_int(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
     north, east, down, vn, ve, vd = _estimate(v)
     lat, lon, alt = v.frame.to_geodetic(north, east, down)
     heading = int(round(math.degrees(v.sensors.attitude_rpy[2]) * 100)) % 36000
+    relative_alt = -(down - v.autopilot.home_ned[2])
     return mavlink.MAVLink_global_position_int_message(
-        v.time_boot_ms, _deg_e7(lat), _deg_e7(lon), int(round(alt * 1000)), int(round(-down * 1000)),
+        v.time_boot_ms, _deg_e7(lat), _deg_e7(lon), int(round(alt * 1000)), int(round(relative_alt * 1000)),
         int(round(vn * 100)), int(round(ve * 100)), int(round(vd * 100)), heading)
 
 
@@ -146,7 +124,9 @@ def local_position_ned(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
     if v.sensors.gps is None:
         return None
     north, east, down, vn, ve, vd = _estimate(v)
-    return mavlink.MAVLink_local_position_ned_message(v.time_boot_ms, north, east, down, vn, ve, vd)
+    origin_n, origin_e, origin_d = v.origin_ned  # the EKF origin: where the position was first known after boot
+    return mavlink.MAVLink_local_position_ned_message(v.time_boot_ms, north - origin_n, east - origin_e,
+                                                      down - origin_d, vn, ve, vd)
 
 
 def attitude(v: SimulatedVehicle) -> mavlink.MAVLink_message:
@@ -156,7 +136,7 @@ def attitude(v: SimulatedVehicle) -> mavlink.MAVLink_message:
 
 def gps_raw_int(v: SimulatedVehicle) -> mavlink.MAVLink_message:
     fix = v.sensors.gps
-    time_usec = int(v.time_s * 1e6)
+    time_usec = int(v.time_since_boot_s * 1e6)
     if fix is None:
         return mavlink.MAVLink_gps_raw_int_message(time_usec, mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0,
                                                    UINT16_MAX, UINT16_MAX, UINT16_MAX, UINT16_MAX, 0)
@@ -183,15 +163,19 @@ def extended_sys_state(v: SimulatedVehicle) -> mavlink.MAVLink_message:
 
 
 def home_position(v: SimulatedVehicle) -> mavlink.MAVLink_message:
-    home = v.config.home
+    home = v.home
+    home_n, home_e, home_d = v.autopilot.home_ned
+    origin_n, origin_e, origin_d = v.origin_ned
     return mavlink.MAVLink_home_position_message(_deg_e7(home.lat_deg), _deg_e7(home.lon_deg),
-                                                 int(round(home.alt_m * 1000)), 0.0, 0.0, 0.0,
-                                                 [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(v.time_s * 1e6))
+                                                 int(round(home.alt_m * 1000)), home_n - origin_n, home_e - origin_e,
+                                                 home_d - origin_d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                                 int(v.time_since_boot_s * 1e6))
 
 
 def autopilot_version(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+    ap = v.autopilot
     return mavlink.MAVLink_autopilot_version_message(
-        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+        ap.CAPABILITIES, ap.FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
         0x5349_4D00_0000_0000 | v.config.system_id)  # "SIM" + system id: stable across runs
 
 

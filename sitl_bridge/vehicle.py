@@ -1,8 +1,15 @@
-"""The simulated vehicle: dynamics + sensors + autopilot behind MAVLink endpoints.
+"""The simulated vehicle: dynamics + sensors + an autopilot personality behind MAVLink endpoints.
 
 One :meth:`SimulatedVehicle.step` is one physics tick: read what the clients sent, let the autopilot
 pick a velocity command, advance the dynamics and sensors, then send the telemetry that is due. The
 same method runs in lockstep (the caller steps) and in real time (:mod:`sitl_bridge.server` paces it).
+
+The autopilot is PX4 (:class:`sitl_bridge.autopilot.Autopilot`) or ArduPilot Copter
+(:class:`sitl_bridge.ardupilot.ArduCopter`), chosen by ``VehicleConfig.autopilot``; both share everything else.
+Realism options: the autopilot may have booted long before the simulation starts (``boot_time_s``) and may reboot
+mid-flight (``reboot_at_s``): the links go silent, the motors stop (an airborne vehicle falls), and the autopilot
+comes back disarmed in its boot mode with ``time_boot_ms`` restarting and home and the local origin re-set where
+the vehicle then is.
 """
 from __future__ import annotations
 
@@ -14,17 +21,24 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.signing import KEY_BYTES, LinkSigning, simulated_timestamp
+from missions.validation import check_fields, check_number
 from sitl_bridge import dynamics, telemetry
-from sitl_bridge.autopilot import ACCEPTED, DENIED, Autopilot, AutopilotEvent, as_int
+from sitl_bridge.ardupilot import ArduCopter
+from sitl_bridge.ardupilot_params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
+from sitl_bridge.autopilot import Autopilot
+from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
+from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
 from sitl_bridge.link import Link
-from sitl_bridge.params import ParameterStore, decode_bytewise, encode_bytewise
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.params import ParameterStore
 from sitl_bridge.sensors import SensorConfig, SensorSuite
-from sitl_bridge.signing import requested_key, vehicle_signing
+from sitl_bridge.signing import vehicle_signing
+from sitl_bridge.telemetry_profiles import PROFILES, link_rates_hz, resolve_profile
+from sitl_bridge.vehicle_messages import MessageHandlers
 
-AUTOPILOT_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1
-CAMERA_COMPONENT = mavlink.MAV_COMP_ID_CAMERA  # zoom commands may be addressed to the camera
+__all__ = ["AUTOPILOT_COMPONENT", "AUTOPILOT_TYPES", "DEFAULT_HOME", "Endpoint", "SimulatedVehicle", "VehicleConfig"]
+
 DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
+AUTOPILOT_TYPES = ("px4", "ardupilot")
 
 
 @dataclass(frozen=True)
@@ -46,11 +60,26 @@ class VehicleConfig:
     sensors: SensorConfig = field(default_factory=SensorConfig)
     """GPS, barometer and attitude noise."""
     params: dict[str, float] = field(default_factory=dict)
-    """PX4 parameter overrides by name (see sitl_bridge.params.PARAM_SPECS)."""
+    """Parameter overrides by name, of the chosen autopilot (PX4: sitl_bridge.params.PARAM_SPECS, ArduPilot:
+    sitl_bridge.ardupilot_params.ARDUPILOT_PARAM_SPECS)."""
     telemetry_rates_hz: dict[int, float] = field(default_factory=dict)
-    """Overrides of the default stream rates by message id (0 disables a stream)."""
+    """Overrides of the profile's stream rates by message id, on every link (0 disables a stream)."""
     signing_key: bytes | None = field(default=None, repr=False)
     """MAVLink 2 signing secret (32 bytes, see missions.signing.load_key_file); None: no signing."""
+    autopilot: str = "px4"
+    """The autopilot personality: "px4" (PX4 custom modes, OFFBOARD) or "ardupilot" (ArduCopter modes, GUIDED)."""
+    telemetry_profile: str = "default"
+    """Default stream rates (sitl_bridge.telemetry_profiles): "default" ("legacy" for PX4, "ardupilot" for
+    ArduPilot), "legacy" (this simulator's historic rates; replays stay byte-identical), "px4" (PX4's onboard mode
+    on API links, normal mode on the GCS link), "px4_sitl" (as px4 SITL starts them) or "ardupilot" (SRn_* = 0:
+    only HEARTBEAT until a client asks for streams)."""
+    boot_time_s: float = 0.0
+    """The autopilot booted this long before the simulation starts (s, [0, 1e7]; rounded to the physics tick):
+    time_boot_ms, TIMESYNC and the other boot-relative times start there, e.g. 600 for an autopilot up 10 minutes."""
+    reboot_at_s: float | None = None
+    """Simulated time (s, [0, 1e7]) at which the autopilot reboots; None: never."""
+    reboot_downtime_s: float = 5.0
+    """How long a reboot keeps the autopilot silent, motors off (s, [0.1, 600]); it then boots afresh."""
 
     def __post_init__(self) -> None:
         if not 100.0 <= self.physics_rate_hz <= 2000.0:
@@ -60,42 +89,34 @@ class VehicleConfig:
         if self.signing_key is not None and len(self.signing_key) != KEY_BYTES:
             raise ValueError(f"signing_key must be {KEY_BYTES} bytes, got {len(self.signing_key)}; "
                              "load it with missions.signing.load_key_file")
+        if self.autopilot not in AUTOPILOT_TYPES:
+            raise ValueError(f"VehicleConfig.autopilot must be one of {', '.join(AUTOPILOT_TYPES)}, "
+                             f"got {self.autopilot!r}")
+        if self.telemetry_profile not in PROFILES:
+            raise ValueError(f"VehicleConfig.telemetry_profile must be one of {', '.join(PROFILES)}, "
+                             f"got {self.telemetry_profile!r}")
+        check_fields(self, (("boot_time_s", 0.0, 1e7), ("reboot_downtime_s", 0.1, 600.0)))
+        if self.reboot_at_s is not None:
+            check_number(type(self).__name__, "reboot_at_s", self.reboot_at_s, 0.0, 1e7)
 
 
-class _LinkWriter:
-    """The ``file`` pymavlink's encoder writes to: forwards each packed message to the link."""
-
-    def __init__(self, link: Link):
-        self.write = link.send
-
-
-class Endpoint:
-    """One link with its own MAVLink encoder/decoder (sequence numbers) and telemetry schedule."""
-
-    def __init__(self, link: Link, system_id: int, rates_hz: dict[int, float]):
-        self.link = link
-        self.mav = mavlink.MAVLink(_LinkWriter(link), srcSystem=system_id, srcComponent=AUTOPILOT_COMPONENT)
-        self.mav.robust_parsing = True  # malformed bytes become BAD_DATA messages, not exceptions
-        self.schedule = telemetry.TelemetrySchedule(rates_hz)
-        self.bad_frames = 0
-
-    def send(self, msg: mavlink.MAVLink_message) -> None:
-        self.mav.send(msg)
-
-    def parse(self, data: bytes) -> list[mavlink.MAVLink_message]:
-        """The messages in one received datagram. Links carry whole frames per datagram (UDP, the memory link),
-        so bytes left over are a damaged frame: dropped and counted, never allowed to swallow the next datagram
-        (a garbage header claiming 255 bytes would otherwise eat the following valid command)."""
-        messages = self.mav.parse_buffer(data) or []
-        if self.mav.buf_len():
-            self.bad_frames += 1
-            self.mav.buf, self.mav.buf_index = bytearray(), 0
-            self.mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-        return messages
+def make_autopilot(config: VehicleConfig, params: ParameterStore, home_alt_m: float) -> AutopilotBase:
+    """A freshly booted autopilot of the configured personality."""
+    if config.autopilot == "ardupilot":
+        return ArduCopter(params, config.airframe)
+    return Autopilot(params, config.airframe, home_alt_m=home_alt_m)
 
 
-class SimulatedVehicle:
-    """A PX4-like multirotor; call :meth:`step` once per physics tick."""
+def make_params(config: VehicleConfig) -> ParameterStore:
+    """The personality's parameter table with the configured overrides (kept across reboots, like flash)."""
+    if config.autopilot == "ardupilot":
+        return ParameterStore({"SYSID_THISMAV": config.system_id, **config.params}, ARDUPILOT_PARAM_SPECS,
+                              ARDUPILOT_READ_ONLY)
+    return ParameterStore(config.params)
+
+
+class SimulatedVehicle(MessageHandlers):
+    """A multirotor with a PX4 or ArduPilot autopilot; call :meth:`step` once per physics tick."""
 
     def __init__(self, config: VehicleConfig | None = None, links: list[Link] | tuple[Link, ...] = (),
                  on_event: Callable[[AutopilotEvent], None] | None = None,
@@ -106,16 +127,20 @@ class SimulatedVehicle:
         self.dt_s = 1.0 / config.physics_rate_hz
         self.tick = 0
         self.frame = LocalFrame(config.home)
+        self.home = config.home  # the autopilot's home (geodetic); moves when the autopilot re-sets it
+        self.origin_ned = (0.0, 0.0, 0.0)  # LOCAL_POSITION_NED's origin in the simulator's frame (the EKF origin)
         self.state = dynamics.VehicleState(battery_wh=config.airframe.battery_capacity_wh)
         self.command = dynamics.HOVER
         self.ground_velocity = (0.0, 0.0, 0.0)
         self.yaw_rate_rad_s = 0.0
         self.power_w = 0.0
         self.sensors = SensorSuite(config.sensors, seed=config.seed)
-        self.params = ParameterStore(config.params)
-        self.autopilot = Autopilot(self.params, config.airframe, home_alt_m=config.home.alt_m)
-        rates = {**telemetry.DEFAULT_RATES_HZ, **config.telemetry_rates_hz}
-        self.endpoints = [Endpoint(link, config.system_id, rates) for link in links]
+        self.is_ardupilot = config.autopilot == "ardupilot"
+        self.telemetry_profile = resolve_profile(config.telemetry_profile, config.autopilot)
+        self.params = make_params(config)
+        self.autopilot = make_autopilot(config, self.params, config.home.alt_m)
+        self.links = list(links)
+        self.endpoints = self._make_endpoints()
         self.on_event = on_event
         self.unhandled: dict[str, int] = {}
         self.handler_errors = 0
@@ -124,31 +149,41 @@ class SimulatedVehicle:
         self.setup_signing_refused = 0
         if config.signing_key is not None:
             self._enable_signing(config.signing_key)
-        self._handlers = {
-            "COMMAND_LONG": self._on_command_long,
-            "COMMAND_INT": self._on_command_int,
-            "SET_POSITION_TARGET_LOCAL_NED": self._on_setpoint,
-            "PARAM_REQUEST_LIST": self._on_param_request_list,
-            "PARAM_REQUEST_READ": self._on_param_request_read,
-            "PARAM_SET": self._on_param_set,
-            "TIMESYNC": self._on_timesync,
-            "SET_MODE": self._on_set_mode,
-            "MISSION_REQUEST_LIST": self._on_mission_request_list,
-            "HEARTBEAT": lambda endpoint, msg: None,
-            "SETUP_SIGNING": self._on_setup_signing,
-        }
+        self._handlers = self.handlers()
+        self._boot_tick = -int(round(config.boot_time_s * config.physics_rate_hz))  # the tick the autopilot booted
+        self._reboot_tick = None if config.reboot_at_s is None else int(round(config.reboot_at_s / self.dt_s))
+        self._down_until_tick: int | None = None
+        self.reboots = 0
         self.sensors.update(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self.autopilot.gps_ok = self.sensors.gps is not None
+
+    def _make_endpoints(self) -> list[Endpoint]:
+        """One endpoint per link, with the profile's rates (ArduPilot: the SRn_* parameters as they are at boot)."""
+        endpoints = []
+        for index, link in enumerate(self.links):
+            rates = link_rates_hz(self.telemetry_profile, link.name, index, self.params)
+            endpoints.append(Endpoint(link, self.config.system_id, {**rates, **self.config.telemetry_rates_hz}, index))
+        return endpoints
 
     # ------------------------------------------------------------------ time
     @property
     def time_s(self) -> float:
-        """Simulated seconds since boot (exact multiple of the tick)."""
+        """Simulated seconds since the simulation started (exact multiple of the tick)."""
         return self.tick * self.dt_s
 
     @property
+    def time_since_boot_s(self) -> float:
+        """Seconds since the autopilot booted (boot_time_s ahead of time_s, restarting at a reboot)."""
+        return (self.tick - self._boot_tick) * self.dt_s
+
+    @property
     def time_boot_ms(self) -> int:
-        return int(self.tick * 1000 // self.config.physics_rate_hz)
+        return int((self.tick - self._boot_tick) * 1000 // self.config.physics_rate_hz)
+
+    @property
+    def powered(self) -> bool:
+        """False while a reboot keeps the autopilot down (no MAVLink in or out)."""
+        return self._down_until_tick is None
 
     def run(self, seconds: float) -> None:
         """Lockstep convenience: step for ``seconds`` of simulated time."""
@@ -158,24 +193,35 @@ class SimulatedVehicle:
     # ------------------------------------------------------------------ one tick
     def step(self) -> None:
         """Advance one physics tick: receive, decide, move, sense, send."""
+        if self.tick == self._reboot_tick:
+            self._power_off()
+        if not self.powered and self.tick >= self._down_until_tick:
+            self._power_on()
         now = self.time_s
-        for endpoint in self.endpoints:
-            for data in endpoint.link.receive():
-                self.receive(endpoint, data)
         ap = self.autopilot
-        self.command = ap.guidance(now, self.state)
+        if self.powered:
+            for endpoint in self.endpoints:
+                for data in endpoint.link.receive():
+                    self.receive(endpoint, data)
+            self.command = ap.guidance(now, self.state)
+        else:
+            for link in self.links:  # the autopilot is booting: whatever arrives is lost
+                link.receive()
+            self.command = dynamics.HOVER
         airframe, wind = self.config.airframe, self.config.wind
         previous_yaw = self.state.yaw_rad
-        self.power_w = dynamics.power_w(self.state, self.command, airframe, wind, ap.armed)
-        self.state = state = dynamics.step(self.state, self.command, airframe, wind, self.dt_s, armed=ap.armed)
+        thrust = self.powered and ap.motors_running
+        self.power_w = dynamics.power_w(self.state, self.command, airframe, wind, thrust)
+        self.state = state = dynamics.step(self.state, self.command, airframe, wind, self.dt_s, armed=thrust)
         self.tick += 1
         self.yaw_rate_rad_s = math.remainder(state.yaw_rad - previous_yaw, math.tau) / self.dt_s
         self.ground_velocity = dynamics.ground_velocity(state, airframe, wind)
         self.sensors.update(self.time_s, (state.north_m, state.east_m, state.down_m), self.ground_velocity,
                             dynamics.attitude(state, airframe, wind))
         ap.gps_ok = self.sensors.gps is not None
-        self._flush_events()
-        self._send_telemetry()
+        if self.powered:
+            self._flush_events()
+            self._send_telemetry()
 
     def _flush_events(self) -> None:
         ap = self.autopilot
@@ -183,10 +229,14 @@ class SimulatedVehicle:
             ap.state_changed = False
             self.broadcast(telemetry.heartbeat(self))
         for event in ap.events:
-            self.broadcast(mavlink.MAVLink_statustext_message(event.severity, event.text.encode()[:50], 0, 0))
+            if event.broadcast:
+                self.broadcast(mavlink.MAVLink_statustext_message(event.severity, event.text.encode()[:50], 0, 0))
             if self.on_event:
                 self.on_event(event)
         ap.events.clear()
+        if ap.home_changed:  # the autopilot moved home itself (ArduPilot at arming): announce it, as both do
+            ap.home_changed = False
+            self._set_home(ap.home_ned)
 
     def _send_telemetry(self) -> None:
         now = self.time_s
@@ -206,7 +256,47 @@ class SimulatedVehicle:
     def log(self, text: str) -> None:
         """Record an event that is not the autopilot's own (commands, parameters) for the operator log."""
         if self.on_event:
-            self.on_event(AutopilotEvent(self.time_s, text, mavlink.MAV_SEVERITY_DEBUG))
+            self.on_event(AutopilotEvent(self.time_s, text, mavlink.MAV_SEVERITY_DEBUG, broadcast=False))
+
+    # ------------------------------------------------------------------ home and reboots
+    def _set_home(self, home_ned: tuple[float, float, float]) -> None:
+        """Home at ``home_ned`` (the simulator's frame): geodetic home, the autopilot's home, HOME_POSITION sent."""
+        self.autopilot.home_ned = home_ned
+        if home_ned == (0.0, 0.0, 0.0):
+            self.home = self.config.home
+        else:
+            self.home = GeoPoint(*self.frame.to_geodetic(*home_ned))
+        if isinstance(self.autopilot, Autopilot):
+            self.autopilot.home_alt_m = self.home.alt_m  # PX4's NAV_TAKEOFF altitude is AMSL, so home's matters
+        self.broadcast(telemetry.home_position(self))
+
+    def _power_off(self) -> None:
+        """The reboot starts: silence, motors off (the autopilot object is replaced at power-on)."""
+        self._down_until_tick = self.tick + max(1, int(round(self.config.reboot_downtime_s / self.dt_s)))
+        self._boot_tick = self.tick  # the new boot: time_boot_ms counts from here
+        self.autopilot.armed = False
+        self.reboots += 1
+        self.log(f"autopilot rebooting at {self.time_s:.2f} s ({'in the air' if not self.state.on_ground else 'on the ground'}), "
+                 f"back in {self.config.reboot_downtime_s:g} s")
+
+    def _power_on(self) -> None:
+        """The autopilot is up again: fresh state in its boot mode, fresh MAVLink sequence numbers and streams
+        (the parameters survive), and the local origin and home re-set where the vehicle is now (PX4's and
+        ArduPilot's first position fix after boot sets both; airborne, that home is in the air)."""
+        self._down_until_tick = None
+        state = self.state
+        here = (state.north_m, state.east_m, state.down_m)
+        self.autopilot = make_autopilot(self.config, self.params, self.config.home.alt_m)
+        self.autopilot.gps_ok = self.sensors.gps is not None
+        self.endpoints = self._make_endpoints()
+        if self.signing is not None:
+            for link_id, endpoint in enumerate(self.endpoints):
+                self.signing.install(endpoint.mav, link_id)
+        self.origin_ned = here
+        self._set_home(here)
+        self.autopilot.home_changed = False  # just announced
+        self.log(f"autopilot booted at {self.time_s:.2f} s; home and origin re-set at "
+                 f"{here[0]:.1f} m N, {here[1]:.1f} m E, {-here[2]:.1f} m up")
 
     # ------------------------------------------------------------------ incoming messages
     def receive(self, endpoint: Endpoint, data: bytes) -> None:
@@ -241,149 +331,7 @@ class SimulatedVehicle:
                      f"({verdict}); further rejections are only counted")
         return accepted
 
-    def _for_us(self, msg: mavlink.MAVLink_message, components: tuple[int, ...] = (AUTOPILOT_COMPONENT,)) -> bool:
-        return (msg.target_system in (0, self.config.system_id)
-                and msg.target_component in (0, *components))
-
-    def _on_command_long(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
-        self._execute(endpoint, msg, msg.command, params)
-
-    def _on_command_int(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
-        self._execute(endpoint, msg, msg.command, params)
-
-    def _execute(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, command: int, p: tuple[float, ...]) -> None:
-        if not self._for_us(msg, (AUTOPILOT_COMPONENT, CAMERA_COMPONENT)):
-            return
-        now = self.time_s
-        follow_up: mavlink.MAVLink_message | None = None
-        if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_message_interval(endpoint, as_int(p[0]), p[1], now)
-        elif command in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-            builder = telemetry.BUILDERS.get(msg_id)
-            follow_up = builder(self) if builder else None
-            result = ACCEPTED if follow_up is not None else DENIED
-        else:
-            result = self.autopilot.handle_command(command, p, now, self.state)
-        endpoint.send(mavlink.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(),
-                                                          msg.get_srcComponent()))
-        if follow_up is not None:  # the spec: ACK first, then the requested message
-            endpoint.send(follow_up)
-        if command not in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL) or result != ACCEPTED:
-            self.log(f"command {_command_name(command)} from {msg.get_srcSystem()}/{msg.get_srcComponent()}: "
-                     f"{_result_name(result)}")
-
-    def _set_message_interval(self, endpoint: Endpoint, msg_id: int, interval_us: float, now: float) -> int:
-        if msg_id not in telemetry.BUILDERS or msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            return DENIED
-        if not math.isfinite(interval_us):
-            return DENIED
-        if interval_us == 0:  # back to the default rate
-            rate = {**telemetry.DEFAULT_RATES_HZ, **self.config.telemetry_rates_hz}.get(msg_id, 0.0)
-            endpoint.schedule.set_interval(msg_id, 1.0 / rate if rate > 0 else None, now)
-        elif interval_us < 0:
-            endpoint.schedule.set_interval(msg_id, None, now)
-        else:
-            endpoint.schedule.set_interval(msg_id, max(interval_us * 1e-6, self.dt_s), now)
-        return ACCEPTED
-
-    def _on_setpoint(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if not self._for_us(msg):
-            return
-        self.autopilot.handle_setpoint(self.time_s, self.state, msg.coordinate_frame, msg.type_mask,
-                                       (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
-
-    def _on_set_mode(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        # The legacy SET_MODE message: no ACK in the protocol.
-        if msg.target_system != self.config.system_id:
-            return
-        mode = FlightMode.from_custom_mode(msg.custom_mode)
-        if mode is not None and msg.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            self.autopilot.set_mode(mode, self.time_s, self.state, "SET_MODE")
-
-    # ------------------------------------------------------------------ parameters
-    def _param_value(self, name: str) -> mavlink.MAVLink_message:
-        spec = self.params.specs[name]
-        return mavlink.MAVLink_param_value_message(name.encode(), encode_bytewise(self.params[name], spec.kind),
-                                                   spec.kind, len(self.params), self.params.index(name))
-
-    def _on_param_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if self._for_us(msg):
-            for name in self.params.names:
-                endpoint.send(self._param_value(name))
-
-    def _on_param_request_read(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if not self._for_us(msg):
-            return
-        if msg.param_index >= 0:
-            if msg.param_index < len(self.params):
-                endpoint.send(self._param_value(self.params.names[msg.param_index]))
-        elif _param_name(msg.param_id) in self.params.specs:
-            endpoint.send(self._param_value(_param_name(msg.param_id)))
-
-    def _on_param_set(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if not self._for_us(msg):
-            return
-        name = _param_name(msg.param_id)
-        spec = self.params.specs.get(name)
-        if spec is None:
-            self.log(f"PARAM_SET {name!r}: unknown parameter, ignored")
-            return
-        error = self.params.set(name, decode_bytewise(msg.param_value, spec.kind))
-        self.log(f"PARAM_SET {name} = {self.params[name]:g}" + (f" refused: {error}" if error else ""))
-        # Echo the (possibly unchanged) value on every link, as PX4 does, so all clients stay in sync.
-        self.broadcast(self._param_value(name))
-
-    # ------------------------------------------------------------------ small protocol services
-    def _on_timesync(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if msg.tc1 == 0:  # a request: answer with our time in ns
-            endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))
-
-    # ------------------------------------------------------------------ signing
     def _enable_signing(self, key: bytes) -> None:
         self.signing = vehicle_signing(key, self.signing_timestamp)
         for link_id, endpoint in enumerate(self.endpoints):
             self.signing.install(endpoint.mav, link_id)
-
-    def _on_setup_signing(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        # No ACK in the protocol: the sender learns the outcome from whether our next frames verify.
-        if not self._for_us(msg):
-            return
-        if self.autopilot.armed:  # a key change in flight could cut the link to the pilot
-            self.setup_signing_refused += 1
-            self.log("SETUP_SIGNING refused: the vehicle is armed")
-            return
-        key = requested_key(msg)
-        if key is None:
-            self.signing = None
-            for other in self.endpoints:
-                other.mav.signing = mavlink.MAVLinkSigning()
-            self.log("SETUP_SIGNING: signing switched off (all-zero key)")
-        elif self.signing is None:
-            self._enable_signing(key)
-            self.log("SETUP_SIGNING: signing switched on with the new key")
-        else:
-            self.signing.replace_key(key, msg.initial_timestamp)
-            self.log("SETUP_SIGNING: new key installed")
-
-    def _on_mission_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if self._for_us(msg):  # no missions are stored; saying so stops ground stations waiting
-            endpoint.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                                msg.mission_type))
-
-
-def _param_name(raw: str | bytes) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode("ascii", errors="replace")
-    return raw.split("\x00", 1)[0]
-
-
-def _command_name(command: int) -> str:
-    entry = mavlink.enums["MAV_CMD"].get(command)
-    return entry.name.removeprefix("MAV_CMD_") if entry else str(command)
-
-
-def _result_name(result: int) -> str:
-    return mavlink.enums["MAV_RESULT"][result].name.removeprefix("MAV_RESULT_")

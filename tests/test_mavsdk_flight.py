@@ -2,6 +2,12 @@
 
 MAVSDK listens with ``udpin://0.0.0.0:PORT`` and the vehicle's API link sends to PORT, as with PX4 SITL.
 Every await is bounded; the vehicle runs at 2x real time to keep the test short.
+
+``mavsdk`` 4.x is the native binding: the gRPC package's ``System()`` (``drone.connect``, ``drone.offboard``) is
+gone (constructing it raises TypeError with a migration hint). MAVSDK's documented offboard example
+(MAVSDK-Python examples/offboard_velocity_ned.py) is therefore flown here with the 4.x API: the same sequence of
+calls (connect, wait for global position and home, arm, one initial setpoint, start offboard at once, velocity
+legs, stop offboard), then land.
 """
 from __future__ import annotations
 
@@ -75,9 +81,8 @@ async def fly(port: int, server: VehicleServer) -> None:
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.HOLD, T, "HOLD after takeoff")
         assert -vehicle.state.down_m == pytest.approx(8.0, abs=1.0)
 
-        # Offboard: setpoints first (MAVSDK streams them), > 1 s later the switch is accepted.
+        # Offboard: one setpoint (MAVSDK then streams it at 20 Hz) and the switch at once, as PX4 accepts it.
         await bounded(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0)))
-        await sim_sleep(1.5)
         await bounded(offboard.start())
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.OFFBOARD, T, "OFFBOARD")
 
@@ -113,6 +118,63 @@ async def fly(port: int, server: VehicleServer) -> None:
         if _inflight:  # never destroy under a blocked call; MAVSDK times its own calls out within 3 s
             await asyncio.wait(set(_inflight), timeout=5)
         drone.destroy()
+
+
+async def fly_offboard_example(port: int, server: VehicleServer) -> dict[str, tuple[float, ...]]:
+    """MAVSDK's offboard_velocity_ned.py, step for step (sleeps in simulated seconds); returns each leg's
+    ground velocity (north, east, down, m/s), heading (deg) and altitude (m) at its end, by leg name."""
+    vehicle = server.vehicle
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    legs = {}
+    try:
+        await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
+        system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)  # "Waiting for drone to connect..."
+        assert system is not None, "MAVSDK saw no autopilot"
+        action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                    20, "global position estimate")
+        await bounded(action.arm())  # "-- Arming"
+        await bounded(offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0)))  # "-- Setting initial setpoint"
+        await bounded(offboard.start())  # "-- Starting offboard": no wait before it
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.OFFBOARD, T, "OFFBOARD")
+        for name, setpoint, seconds in (("up", VelocityNedYaw(0.0, 0.0, -2.0, 0.0), 4.0),
+                                        ("north", VelocityNedYaw(2.0, 0.0, 0.0, 90.0), 4.0),
+                                        ("south", VelocityNedYaw(-2.0, 0.0, 0.0, 270.0), 4.0),
+                                        ("west", VelocityNedYaw(0.0, -2.0, 0.0, 90.0), 4.0),
+                                        ("east", VelocityNedYaw(0.0, 2.0, 0.0, 90.0), 4.0),
+                                        ("turn south", VelocityNedYaw(0.0, 0.0, 0.0, 180.0), 2.0),
+                                        ("down", VelocityNedYaw(0.0, 0.0, 1.0, 0.0), 4.0)):
+            await bounded(offboard.set_velocity_ned(setpoint))
+            await sim_sleep(seconds)
+            vn, ve, vd = vehicle.ground_velocity
+            legs[name] = (vn, ve, vd, math.degrees(vehicle.state.yaw_rad) % 360.0, -vehicle.state.down_m)
+        await bounded(offboard.stop())  # "-- Stopping offboard"
+        await first(telemetry.subscribe_flight_mode(), lambda m: m != FlightMode.OFFBOARD, T, "leaving OFFBOARD")
+        await bounded(action.land())
+        await first(telemetry.subscribe_landed_state(), lambda s: s == LandedState.ON_GROUND, 60, "landed")
+        await first(telemetry.subscribe_armed(), lambda armed: not armed, 20, "disarmed")
+    finally:
+        if _inflight:
+            await asyncio.wait(set(_inflight), timeout=5)
+        drone.destroy()
+    return legs
+
+
+def test_mavsdk_offboard_velocity_ned_example_flies_as_documented(udp_ports):
+    api_port, mavsdk_port = udp_ports[:2]
+    config = VehicleConfig(seed=6, boot_time_s=600.0)  # an autopilot that booted ten minutes earlier
+    with VehicleServer(config, UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None),
+                       speed=SPEED) as server:
+        legs = asyncio.run(asyncio.wait_for(fly_offboard_example(mavsdk_port, server), 150))
+        assert server.error is None and server.vehicle.handler_errors == 0
+    expected = {"up": (0, 0, -2, 0), "north": (2, 0, 0, 90), "south": (-2, 0, 0, 270), "west": (0, -2, 0, 90),
+                "east": (0, 2, 0, 90), "turn south": (0, 0, 0, 180), "down": (0, 0, 1, 0)}
+    for name, (vn, ve, vd, heading) in expected.items():
+        flown = legs[name]
+        assert flown[:3] == pytest.approx((vn, ve, vd), abs=0.3), name
+        assert abs((flown[3] - heading + 180.0) % 360.0 - 180.0) < 5.0, name
+    assert legs["up"][4] == pytest.approx(7.0, abs=1.5)  # took off in OFFBOARD: 2 m/s for 4 s, less the spin-up
+    assert server.vehicle.state.on_ground and not server.vehicle.autopilot.armed
 
 
 def test_mavsdk_flies_takeoff_offboard_ned_and_body_rtl_and_land(udp_ports):

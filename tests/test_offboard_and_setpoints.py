@@ -44,26 +44,59 @@ def fly(pilot: LockstepPilot, seconds: float) -> None:
 
 
 # ---------------------------------------------------------------- the switch into OFFBOARD
-def test_offboard_rejected_without_a_stream():
+# PX4's rule (OffboardChecks::checkAndReport): OFFBOARD can run while the last setpoint is newer than COM_OF_LOSS_T.
+# Commander answers DO_SET_MODE with TEMPORARILY_REJECTED otherwise, and printRejectMode() says so to component 190.
+REJECT_TEXT = "Switching to Offboard is currently not available"
+
+
+def statustexts(pilot: LockstepPilot, since: int = 0) -> list[str]:
+    return [m.text for m in pilot.received[since:] if m.get_type() == "STATUSTEXT"]
+
+
+def test_offboard_rejected_without_a_setpoint():
     pilot = airborne()
+    seen = len(pilot.received)
     assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
     assert pilot.heartbeat_mode() is FlightMode.HOLD
+    assert REJECT_TEXT in statustexts(pilot, seen)
 
 
-def test_offboard_rejected_after_less_than_a_second_of_setpoints():
+def test_a_single_setpoint_makes_offboard_available():
+    """The MAVSDK flow: one set_velocity_ned, then offboard.start() at once (refused before PX4's rule was used)."""
     pilot = airborne()
-    pilot.stream = (0.0, 0.0, 0.0, LOCAL_NED)
-    fly(pilot, 0.6)
-    assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
-    fly(pilot, 0.6)
+    pilot.send_velocity(0.0, 0.0, 0.0)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
+    assert pilot.heartbeat_mode() is FlightMode.OFFBOARD
+
+
+@pytest.mark.parametrize("loss_timeout_s, result", [(1.0, TEMPORARILY_REJECTED), (3.0, ACCEPTED)])
+def test_a_setpoint_older_than_com_of_loss_t_is_stale(loss_timeout_s, result):
+    pilot = airborne({"COM_OF_LOSS_T": loss_timeout_s})
+    pilot.send_velocity(0.0, 0.0, 0.0)
+    fly(pilot, 1.2)
+    seen = len(pilot.received)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == result
+    assert (REJECT_TEXT in statustexts(pilot, seen)) == (result == TEMPORARILY_REJECTED)
+
+
+def test_slow_setpoints_are_enough_while_each_is_recent():
+    pilot = airborne()
+    pilot.stream, pilot.stream_period_s = (0.0, 0.0, 0.0, LOCAL_NED), 0.7  # PX4 has no rate rule, only freshness
+    fly(pilot, 3.0)
     assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
 
 
-def test_offboard_rejected_when_setpoints_come_slower_than_2_hz():
+def test_the_refusal_text_goes_to_ground_stations_once_a_second():
     pilot = airborne()
-    pilot.stream, pilot.stream_period_s = (0.0, 0.0, 0.0, LOCAL_NED), 0.7
-    fly(pilot, 3.0)
+    seen = len(pilot.received)
+    for _ in range(3):  # three refusals within a second: one STATUSTEXT
+        assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
+    assert statustexts(pilot, seen).count(REJECT_TEXT) == 1
+    fly(pilot, 1.1)
+    seen = len(pilot.received)
+    pilot.mav.srcComponent = 191  # not a ground station (MAV_COMP_ID_MISSIONPLANNER is 190): no text
     assert pilot.set_mode(FlightMode.OFFBOARD) == TEMPORARILY_REJECTED
+    assert REJECT_TEXT not in statustexts(pilot, seen)
 
 
 # ---------------------------------------------------------------- offboard loss failsafe

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import struct
+import time
 
 import pytest
 from conftest import UdpClient
@@ -104,3 +105,80 @@ def _fly(client: UdpClient, config: VehicleConfig) -> None:
                 40.0, "landed")
     client.wait(lambda: not is_armed(client.latest["HEARTBEAT"]), 5.0, "auto-disarm")
     assert client.latest["GLOBAL_POSITION_INT"].relative_alt < 1_000
+
+
+# ---------------------------------------------------------------- the ArduPilot personality over UDP and TCP
+ARDUPILOT_SPEED = 3.0  # simulated seconds per wall second
+
+
+def test_pymavlink_script_flies_the_ardupilot_personality_over_udp(udp_ports):
+    companion_bind, companion_port, gcs_bind = udp_ports[:3]
+    config = VehicleConfig(autopilot="ardupilot", seed=8, boot_time_s=600.0)
+    ports = UdpPorts(api_port=companion_bind, api_remote_port=companion_port, gcs_port=gcs_bind,
+                     gcs_remote_port=None, tcp_port=None)
+    with VehicleServer(config, ports, speed=ARDUPILOT_SPEED) as server:
+        client = UdpClient(f"udpin:127.0.0.1:{companion_port}")
+        try:
+            _fly_ardupilot(client, server)
+        finally:
+            client.close()
+        assert server.error is None and server.vehicle.handler_errors == 0
+
+
+def _sim_seconds(client: UdpClient, seconds: float) -> None:
+    client.pump(seconds / ARDUPILOT_SPEED)
+
+
+def _fly_ardupilot(client: UdpClient, server: VehicleServer) -> None:
+    hb = client.wait_message("HEARTBEAT", 5.0)
+    assert (hb.autopilot, hb.custom_mode) == (mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0)  # ArduCopter, STABILIZE
+    _sim_seconds(client, 2.0)
+    assert "GLOBAL_POSITION_INT" not in client.latest  # SRn_* = 0: nothing streams until asked
+    client.conn.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+    client.wait(lambda: "GLOBAL_POSITION_INT" in client.latest, 3.0, "streams after REQUEST_DATA_STREAM")
+    assert client.latest["GLOBAL_POSITION_INT"].time_boot_ms > 600_000  # booted ten minutes before
+
+    assert client.command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4).result == mavlink.MAV_RESULT_ACCEPTED  # GUIDED
+    assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
+    ack = client.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10.0)  # relative to home
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    client.wait(lambda: client.latest["GLOBAL_POSITION_INT"].relative_alt > 9_500, 15.0, "takeoff to 10 m")
+    assert client.latest["HEARTBEAT"].custom_mode == 4  # still GUIDED
+
+    start = client.latest["LOCAL_POSITION_NED"]
+    client.stream = (3.0, 0.0, 0.0)
+    client.wait(lambda: client.latest["LOCAL_POSITION_NED"].time_boot_ms - start.time_boot_ms >= 5000, 5.0, "5 s")
+    assert client.latest["LOCAL_POSITION_NED"].vx == pytest.approx(3.0, abs=0.5)
+    client.stream = None
+    _sim_seconds(client, 6.0)  # past GUID_TIMEOUT (3 s): the vehicle stops and stays in GUIDED
+    stopped = client.latest["LOCAL_POSITION_NED"]
+    assert math.hypot(stopped.vx, stopped.vy) < 0.5 and client.latest["HEARTBEAT"].custom_mode == 4
+
+    assert client.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == mavlink.MAV_RESULT_ACCEPTED
+    client.wait(lambda: not is_armed(client.latest["HEARTBEAT"]), 30.0, "RTL, landing and disarm")
+    assert client.latest["HEARTBEAT"].custom_mode == 6  # ArduPilot stays in RTL after landing
+    assert any(m.get_type() == "STATUSTEXT" and m.text == "Disarming motors" for m in client.received)
+    assert math.hypot(server.vehicle.state.north_m, server.vehicle.state.east_m) < 1.5
+
+
+def test_pymavlink_reaches_the_ardupilot_personality_on_tcp_like_sitl_serial0(udp_ports):
+    from pymavlink import mavutil
+
+    tcp_port, companion_bind, companion_port = udp_ports[:3]
+    ports = UdpPorts(api_port=companion_bind, api_remote_port=companion_port, gcs_remote_port=None, tcp_port=tcp_port)
+    with VehicleServer(VehicleConfig(autopilot="ardupilot", seed=2), ports, speed=2.0) as server:
+        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_port}", source_system=255, source_component=190)
+        try:
+            hb = conn.wait_heartbeat(timeout=5)
+            assert hb is not None and hb.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+            conn.mav.param_request_list_send(1, 1)
+            names = set()
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline and len(names) < len(server.vehicle.params):
+                msg = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=1)
+                if msg is not None:
+                    names.add(msg.param_id)
+            assert len(names) == len(server.vehicle.params)  # every frame intact over the byte stream
+            assert server.vehicle.endpoints[0].bad_frames == 0 and server.links[0].name == "tcp"
+        finally:
+            conn.close()

@@ -96,7 +96,7 @@ def test_takeoff_uses_mis_takeoff_alt_when_param7_is_nan(pilot):
 def test_land_rtl_and_set_mode(pilot):
     airborne(pilot)
     pilot.stream = (2.0, 0.0, 0.0, mavlink.MAV_FRAME_LOCAL_NED)
-    pilot.wait_for(lambda: pilot.vehicle.autopilot.stream_ok(pilot.vehicle.time_s), 3.0, "stream")
+    pilot.wait_for(lambda: not pilot.vehicle.autopilot.offboard_signal_lost(pilot.vehicle.time_s), 3.0, "stream")
     assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
     pilot.wait_for(lambda: pilot.vehicle.state.north_m > 10.0, 20.0, "fly out")
     pilot.stream = None

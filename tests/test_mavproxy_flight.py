@@ -1,0 +1,160 @@
+"""MAVProxy flies both personalities of the simulated vehicle, headless, over real sockets.
+
+MAVProxy (``mavproxy.py``, 1.8.75) runs as a subprocess with no console or map; its commands go to its stdin
+through a pipe (its interactive shell reads lines from any stdin) and its output is read line by line. The PX4
+vehicle is reached on the GCS link (``--master=udpin:...``, as QGroundControl would), the ArduPilot one on its TCP
+port like ArduPilot SITL's SERIAL0 (``--master=tcp:...``). Every wait is bounded; the vehicles run at 2-3x.
+"""
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("MAVProxy")
+
+from sitl_bridge.ardupilot_modes import CopterMode  # noqa: E402
+from sitl_bridge.px4_modes import FlightMode  # noqa: E402
+from sitl_bridge.server import UdpPorts, VehicleServer  # noqa: E402
+from sitl_bridge.vehicle import VehicleConfig  # noqa: E402
+
+pytestmark = pytest.mark.slow
+SPEED = 2.0
+MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
+
+
+class MavProxy:
+    """A headless MAVProxy: ``send`` writes a command line, ``expect`` waits for an output line."""
+
+    def __init__(self, master: str, workdir: Path):
+        if not MAVPROXY.exists():
+            pytest.skip("mavproxy.py is not installed next to this Python")
+        env = {**os.environ, "HOME": str(workdir), "PYTHONUNBUFFERED": "1"}  # no ~/.mavinit.scr of the user
+        # param_ftp 0: fetch parameters with PARAM_REQUEST_LIST at once (the vehicle has no MAVLink FTP)
+        self.process = subprocess.Popen([sys.executable, str(MAVPROXY), f"--master={master}", "--no-state",
+                                         "--cmd=set param_ftp 0"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                        text=True, bufsize=1, cwd=workdir, env=env)
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.process.stdout:
+            self._queue.put(line.rstrip())
+
+    def send(self, command: str) -> None:
+        self.process.stdin.write(command + "\n")
+        self.process.stdin.flush()
+
+    def expect(self, text: str, timeout_s: float = 15.0) -> str:
+        """The first output line (from now, or already read but not yet matched) containing ``text``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for index, line in enumerate(self.lines):
+                if text in line:
+                    del self.lines[: index + 1]
+                    return line
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise AssertionError(f"MAVProxy did not print {text!r} within {timeout_s} s; last lines: "
+                                     f"{self.lines[-15:]}")
+            try:
+                self.lines.append(self._queue.get(timeout=min(remaining, 0.2)))
+            except queue.Empty:
+                pass
+
+    def close(self) -> None:
+        try:
+            self.process.stdin.close()
+            self.process.wait(timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            self.process.kill()
+            self.process.wait(timeout=5)
+
+
+def wait_until(condition, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.05)
+
+
+def return_home(mavproxy: MavProxy, vehicle, command: str, answer: str) -> None:
+    """RTL by a MAVProxy command; the vehicle lands at home and disarms, and MAVProxy sees it."""
+    mavproxy.send(command)
+    mavproxy.expect(answer)
+    wait_until(lambda: not vehicle.autopilot.armed, 60, "return, landing and disarm")
+    mavproxy.expect("DISARMED")
+    assert vehicle.state.on_ground and abs(vehicle.state.north_m) < 1.5
+
+
+def test_mavproxy_flies_the_px4_personality(udp_ports, tmp_path):
+    api_port, api_remote, gcs_port, gcs_remote = udp_ports
+    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_port=gcs_port, gcs_remote_port=gcs_remote)
+    with VehicleServer(VehicleConfig(seed=3), ports, speed=SPEED) as server:
+        vehicle = server.vehicle
+        mavproxy = MavProxy(f"udpin:127.0.0.1:{gcs_remote}", tmp_path)
+        try:
+            mavproxy.expect("Detected vehicle 1:1")
+            mavproxy.expect(f"Received {len(vehicle.params)} parameters", 30)
+            mavproxy.send("param set MIS_TAKEOFF_ALT 8")
+            wait_until(lambda: vehicle.params["MIS_TAKEOFF_ALT"] == 8.0, 10, "MIS_TAKEOFF_ALT")
+            mavproxy.send("arm throttle")
+            mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+            mavproxy.send("takeoff 8")  # param7 AMSL for PX4: below home, so PX4 takes off to MIS_TAKEOFF_ALT
+            mavproxy.expect("NAV_TAKEOFF: ACCEPTED")
+            wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD and -vehicle.state.down_m > 7.5, 20,
+                       "takeoff to 8 m")
+            mavproxy.send("velocity 3 0 0")  # one setpoint (BODY_NED), then OFFBOARD at once: PX4 accepts it
+            mavproxy.send("long DO_SET_MODE 1 6 0")
+            mavproxy.expect("DO_SET_MODE: ACCEPTED")
+            start = vehicle.state.north_m
+            for _ in range(15):  # keep the setpoints coming (COM_OF_LOSS_T is 1 s of vehicle time)
+                mavproxy.send("velocity 3 0 0")
+                time.sleep(0.15)
+            assert vehicle.autopilot.mode is FlightMode.OFFBOARD
+            assert vehicle.state.north_m - start > 3.0
+            return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
+        finally:
+            mavproxy.close()
+        assert server.error is None and vehicle.handler_errors == 0
+
+
+def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tmp_path):
+    tcp_port, api_port, api_remote, _ = udp_ports
+    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)
+    config = VehicleConfig(autopilot="ardupilot", seed=3, params={"RTL_LOIT_TIME": 2000})
+    with VehicleServer(config, ports, speed=1.5 * SPEED) as server:
+        vehicle = server.vehicle
+        mavproxy = MavProxy(f"tcp:127.0.0.1:{tcp_port}", tmp_path)
+        try:
+            mavproxy.expect("Detected vehicle 1:1")
+            mavproxy.expect("Mode STABILIZE")  # MAVProxy decodes ArduCopter's mode numbers
+            mavproxy.send("mode GUIDED")
+            mavproxy.expect("DO_SET_MODE: ACCEPTED")
+            mavproxy.send("arm throttle")
+            mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+            mavproxy.send("takeoff 10")  # ArduPilot: metres above home
+            mavproxy.expect("NAV_TAKEOFF: ACCEPTED")
+            wait_until(lambda: not vehicle.autopilot.taking_off and -vehicle.state.down_m > 9.5, 20, "10 m")
+            assert vehicle.autopilot.mode is CopterMode.GUIDED
+            wait_until(lambda: vehicle.endpoints[0].default_rates_hz.get(33, 0) > 0, 15,
+                       "MAVProxy's REQUEST_DATA_STREAM")  # GLOBAL_POSITION_INT, which ArduPilot streams only on request
+            start = vehicle.state.north_m
+            mavproxy.send("velocity 2 0 0")  # one setpoint: flown for GUID_TIMEOUT (3 s), then the vehicle stops
+            wait_until(lambda: vehicle.autopilot.guided_timed_out, 10, "GUID_TIMEOUT")
+            time.sleep(2.0 / (1.5 * SPEED))
+            assert vehicle.state.north_m - start == pytest.approx(6.0, abs=1.5)
+            assert abs(vehicle.state.vn_mps) < 0.3 and vehicle.autopilot.mode is CopterMode.GUIDED
+            return_home(mavproxy, vehicle, "mode RTL", "Mode RTL")
+        finally:
+            mavproxy.close()
+        assert server.error is None and vehicle.handler_errors == 0
