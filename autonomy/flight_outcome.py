@@ -11,28 +11,37 @@ Outcomes:
   the vehicle raised no failsafe of its own that the runner did not resume the search from (a link-loss failsafe
   followed by a resumption, autonomy.link_loss, is part of a completed search).
 * ``safe``: something went wrong (a runner failsafe or abort, a vehicle failsafe) but the vehicle ended landed and
-  disarmed, returning (RTL), landing, or holding position (HOLD or POSCTL); ``reason`` says what went wrong first.
+  disarmed, returning (RTL), landing, or holding position (PX4 HOLD or POSCTL, ArduPilot LOITER or BRAKE, or
+  GUIDED stopped by its GUID_TIMEOUT); ``reason`` says what went wrong first.
 * ``ditched``: the vehicle touched the surface farther than ``FlyawayLimits.home_radius_m`` from home, in any mode
   (over a search area at sea that is the loss of the drone, whatever the autopilot thought it was doing); it
   outranks ``safe`` and ``completed``: a drone that descended into the water is not an end state to grade safe.
 * ``flyaway``: the vehicle went more than ``FlyawayLimits.fence_excursion_m`` beyond the geofence, or kept flying
   OFFBOARD with no fresh setpoint for longer than ``FlyawayLimits.stale_setpoint_s`` (PX4's default offboard-loss
-  time plus half a second: a vehicle whose failsafe was set later, or off, is caught too), or was still flying in
-  another mode when the settling time ran out.
+  time plus half a second: a vehicle whose failsafe was set later, or off, is caught too), or kept moving in GUIDED
+  with no fresh setpoint for longer than its GUID_TIMEOUT plus ``FlyawayLimits.guided_stop_margin_s`` (by then
+  ArduPilot must have stopped it), or was still flying in another mode when the settling time ran out.
+
+The watch reads the vehicle's personality-neutral status (``vehicle.autopilot.status``: armed, phase, last
+setpoint), so PX4 and ArduPilot flights are judged by the same rules.
 """
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from missions.mission import Mission
 from missions.validation import check_fields
-from sitl_bridge.autopilot import AutopilotEvent
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.vehicle import SimulatedVehicle
 
-HOLDING_MODES = (FlightMode.HOLD, FlightMode.POSCTL)
-RETURNING_MODES = (FlightMode.RTL, FlightMode.LAND)
+SAFE_PHASES = ("holding", "returning", "landing")
+"""Phases (autopilot_base.FlightStatus.phase) an armed vehicle may end in safely."""
+FAILSAFE_TEXT = re.compile(r"^(Failsafe|GCS Failsafe(?! Cleared)|Battery Failsafe)")
+"""The vehicle's own failsafe announcements: PX4-style "Failsafe: ...", ArduPilot's "GCS Failsafe", "Battery
+Failsafe" (not the "GCS Failsafe Cleared" that ends one)."""
+STOPPED_MPS = 0.5
 
 
 @dataclass(frozen=True)
@@ -44,6 +53,9 @@ class FlyawayLimits:
     stale_setpoint_s: float = 1.5
     """Flying OFFBOARD with no setpoint for longer than this (s) is a flyaway (PX4's offboard-loss failsafe acts
     after COM_OF_LOSS_T, 1 s by default)."""
+    guided_stop_margin_s: float = 5.0
+    """Still moving in GUIDED with no setpoint for longer than GUID_TIMEOUT plus this (s) is a flyaway: ArduPilot
+    stops the vehicle after GUID_TIMEOUT (3 s by default), and stopping from 20 m/s at 5 m/s^2 takes 4 s."""
     settle_s: float = 600.0
     """After the runner ends, the vehicle flies on alone at most this long (s, simulated)."""
     hold_settle_s: float = 10.0
@@ -53,6 +65,7 @@ class FlyawayLimits:
 
     def __post_init__(self) -> None:
         check_fields(self, (("fence_excursion_m", 0.0, 10_000.0), ("stale_setpoint_s", 0.1, 60.0),
+                            ("guided_stop_margin_s", 0.1, 60.0),
                             ("settle_s", 0.0, 7200.0), ("hold_settle_s", 0.0, 600.0),
                             ("home_radius_m", 0.0, 10_000.0)))
 
@@ -72,15 +85,32 @@ class FlightWatch:
         self.flyaway: str | None = None
         self.ditched: str | None = None
         self.settled_s = 0.0
+        self._guided_since: float | None = None
 
     def on_vehicle_event(self, event: AutopilotEvent) -> None:
         """The vehicle's event hook: keep its failsafes (their text names the trigger and the action)."""
-        if event.text.startswith("Failsafe"):
+        if FAILSAFE_TEXT.match(event.text):
             self.vehicle_failsafes.append({"time_s": round(event.time_s, 3), "reason": event.text})
+
+    def _setpoint_gap_s(self) -> float:
+        """How long the vehicle has flown its companion's setpoints without a new one (0 when not guided), counted
+        from when it entered the mode at the latest (what it flies on entry is its own stop or hold)."""
+        status, state = self.vehicle.autopilot.status, self.vehicle.state
+        if not (status.armed and status.companion_in_control and not state.on_ground):
+            self._guided_since = None
+            return 0.0
+        if self._guided_since is None:
+            self._guided_since = self.vehicle.time_s
+        last = status.last_setpoint_s if status.last_setpoint_s is not None else -math.inf
+        return self.vehicle.time_s - max(last, self._guided_since)
+
+    def _moving(self) -> bool:
+        state = self.vehicle.state
+        return math.hypot(state.vn_mps, state.ve_mps, state.vd_mps) > STOPPED_MPS
 
     def observe(self) -> None:
         vehicle, limits = self.vehicle, self.limits
-        state, autopilot, now = vehicle.state, vehicle.autopilot, vehicle.time_s
+        state, status, now = vehicle.state, vehicle.autopilot.status, vehicle.time_s
         north_min, north_max, east_min, east_max = self._fence
         excursion = max(0.0, north_min - state.north_m, state.north_m - north_max,
                         east_min - state.east_m, state.east_m - east_max)
@@ -89,12 +119,15 @@ class FlightWatch:
             self.flyaway = f"{excursion:.0f} m beyond the geofence at {now:.1f} s"
         from_home_m = math.hypot(state.north_m, state.east_m)
         if state.on_ground and from_home_m > limits.home_radius_m and self.ditched is None:
-            self.ditched = f"touched the surface {from_home_m:.0f} m from home at {now:.1f} s in {autopilot.mode.name}"
-        if autopilot.armed and autopilot.mode is FlightMode.OFFBOARD and not state.on_ground:
-            gap = now - autopilot.setpoint.time_s if autopilot.setpoint else now
-            self.longest_offboard_gap_s = max(self.longest_offboard_gap_s, gap)
-            if gap > limits.stale_setpoint_s and self.flyaway is None:
-                self.flyaway = f"flying OFFBOARD with no setpoint for {gap:.1f} s at {now:.1f} s"
+            self.ditched = f"touched the surface {from_home_m:.0f} m from home at {now:.1f} s in {status.mode_name}"
+        gap = self._setpoint_gap_s()
+        self.longest_offboard_gap_s = max(self.longest_offboard_gap_s, gap)
+        if self.flyaway is None:
+            if vehicle.is_ardupilot and gap > status.setpoint_timeout_s + limits.guided_stop_margin_s \
+                    and self._moving():
+                self.flyaway = f"still moving in {status.mode_name} with no setpoint for {gap:.1f} s at {now:.1f} s"
+            elif not vehicle.is_ardupilot and gap > limits.stale_setpoint_s:
+                self.flyaway = f"flying {status.mode_name} with no setpoint for {gap:.1f} s at {now:.1f} s"
 
     def settle(self) -> None:
         """Step the vehicle alone (nobody talks to it) until disarmed, holding long enough, or out of time."""
@@ -102,7 +135,7 @@ class FlightWatch:
         start = vehicle.time_s
         holding_since = None
         while vehicle.autopilot.armed and vehicle.time_s - start < limits.settle_s:
-            holding = vehicle.autopilot.mode in HOLDING_MODES
+            holding = self._holding()
             holding_since = (holding_since if holding_since is not None else vehicle.time_s) if holding else None
             if holding_since is not None and vehicle.time_s - holding_since >= limits.hold_settle_s:
                 break
@@ -110,14 +143,19 @@ class FlightWatch:
             self.observe()
         self.settled_s = round(vehicle.time_s - start, 3)
 
+    def _holding(self) -> bool:
+        """Holding position: a hold mode, or (ArduPilot) GUIDED stopped after its setpoint timed out."""
+        status = self.vehicle.autopilot.status
+        return status.phase == "holding" or (self._setpoint_gap_s() > status.setpoint_timeout_s and not self._moving())
+
     def end_state(self) -> str:
         """The vehicle's state now, in words."""
-        autopilot, state = self.vehicle.autopilot, self.vehicle.state
-        if not autopilot.armed:
+        status, state = self.vehicle.autopilot.status, self.vehicle.state
+        if not status.armed:
             return "landed and disarmed" if state.on_ground else "disarmed in the air"
         if state.on_ground:
-            return f"armed on the ground in {autopilot.mode.name}"
-        return f"flying in {autopilot.mode.name} at {-state.down_m:.0f} m"
+            return f"armed on the ground in {status.mode_name}"
+        return f"flying in {status.mode_name} at {-state.down_m:.0f} m"
 
     def unresumed_failsafes(self, report: dict) -> list[dict]:
         """The vehicle's failsafes after which the runner did not resume the search (each resumption answers the
@@ -134,15 +172,15 @@ class FlightWatch:
 
     def outcome(self, report: dict) -> dict:
         """The outcome section of the mission report (see the module docstring)."""
-        autopilot, state = self.vehicle.autopilot, self.vehicle.state
+        status, state = self.vehicle.autopilot.status, self.vehicle.state
         # What went wrong, in time order (the first is the cause; a vehicle failsafe often precedes the runner's).
         problems = [(e["time_s"], f"{e['event']}: {e['reason']}") for e in report["events"]
                     if e["event"] in ("failsafe", "abort")]
         problems = [text for _, text in sorted(problems + [(f["time_s"], f"vehicle: {f['reason']}")
                                                            for f in self.unresumed_failsafes(report)],
                                                key=lambda p: p[0])]
-        landed = not autopilot.armed and state.on_ground
-        safe_end = landed or (autopilot.armed and autopilot.mode in HOLDING_MODES + RETURNING_MODES)
+        landed = not status.armed and state.on_ground
+        safe_end = landed or (status.armed and (status.phase in SAFE_PHASES or self._holding()))
         if self.flyaway is not None:
             outcome, reason = "flyaway", self.flyaway
         elif self.ditched is not None:

@@ -234,10 +234,11 @@ class MissionRunner:
         next_decision = self.clock.now()
         while self.search_end is None:
             now = self.clock.now()
-            if self.link_loss.link_down():  # no pose to act on: stop, and decide again once telemetry is back
+            blind = self._blind(now)
+            if blind is not None:  # no pose to act on: stop, and decide again once it is fresh
                 if self.streamer.latest != HOLD:
                     self.streamer.command(HOLD, now)
-                    self._event("link", f"no telemetry for {self.config.link_loss.gap_s:g} s: holding position")
+                    self._event("link", f"{blind}: holding position")
             elif now + 1e-9 >= next_decision and not self.worker.busy:
                 pose = self.estimator.predict_to(now)
                 self.trajectory.append((round(now, 3), float(pose.position_ned[0]), float(pose.position_ned[1])))
@@ -248,11 +249,20 @@ class MissionRunner:
                 if next_decision <= now:
                     next_decision = now + period
             decision = self.worker.poll(now)
-            if decision is not None and not self.link_loss.link_down():
+            if decision is not None and self._blind(now) is None:
                 self._apply(decision, now)
             self._check_failsafes(now)
             if self.search_end is None:
                 self.tick()
+
+    def _blind(self, now: float) -> str | None:
+        """Why the runner cannot see where the drone is now (None when it can): no telemetry for a while, or no
+        position fused for longer than the estimator trusts (a policy or the fence guard must not act on a pose
+        extrapolated over a gap, as after an autopilot reboot)."""
+        if self.link_loss.link_down():
+            return f"no telemetry for {self.config.link_loss.gap_s:g} s"
+        pose = self.estimator.predict_to(now)
+        return f"no position fused for {pose.age_s:.1f} s" if pose.stale else None
 
     def _apply(self, decision: Decision, now: float) -> None:
         self.decisions.append(decision)
@@ -298,7 +308,11 @@ class MissionRunner:
         self._waiting_reported = False
         if self.link_loss.link_down():
             return  # holding until telemetry is back: the checks below need a live link
-        if now - resumed_s > self.config.policy_stall_rtl_s:
+        if not self.link.armed:  # in flight: a reboot or a crash; there is nothing to resume or to bring home
+            rebooted = f" ({self.boot_time.last_change})" if self.boot_time.timeline_changes else ""
+            self._event("failsafe", f"the vehicle is disarmed{rebooted}")
+            self.search_end = "vehicle disarmed"
+        elif now - resumed_s > self.config.policy_stall_rtl_s:
             self._event("failsafe", f"no policy decision for {self.config.policy_stall_rtl_s:g} s: RTL")
             self.search_end = "policy stalled"
         elif (battery := self.link.battery_percent()) is not None and battery <= self.config.low_battery_pct:
@@ -371,6 +385,10 @@ class MissionRunner:
             self.link.send_command(mavlink.MAV_CMD_SET_CAMERA_ZOOM, (mavlink.ZOOM_TYPE_RANGE, percent))
 
     def _return_and_land(self, reason: str) -> None:
+        if not self.link.armed and self.search_end == "vehicle disarmed":
+            self._record("DONE", f"{reason}: nothing left to fly home")
+            self.streamer.stop()
+            return
         self._record("RTL", reason)
         # The one command that must get through: keep asking until the link is back (or link_recovery_s is over).
         config = self.config

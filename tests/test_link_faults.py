@@ -361,7 +361,7 @@ class AckSwallowingLink:
     commands (they arrive and are carried out; their answers never do)."""
 
     def __init__(self, link):
-        self.link, self.swallowed = link, 0
+        self.link, self.swallowed, self.name = link, 0, link.name
 
     def send(self, data: bytes) -> None:
         if data[:1] == b"\xfd" and int.from_bytes(data[7:10], "little") == mavlink.MAVLINK_MSG_ID_COMMAND_ACK:
@@ -415,7 +415,7 @@ class PilotAtTheGroundStation:
     ``at_s``: a pilot taking over while the companion's link is fine. Its COMMAND_LONG is real MAVLink bytes."""
 
     def __init__(self, link, clock, at_s: float):
-        self.link, self.clock, self.at_s, self.sent = link, clock, at_s, False
+        self.link, self.clock, self.at_s, self.sent, self.name = link, clock, at_s, False, link.name
         self.gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=mavlink.MAV_COMP_ID_MISSIONPLANNER)
 
     def send(self, data: bytes) -> None:

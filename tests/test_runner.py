@@ -14,6 +14,7 @@ import math
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -258,19 +259,30 @@ def test_mission_run_refuses_a_bad_connection_url(policy, mission_file):
     assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.stderr
 
 
-def fly_against_sitl_process(policy, tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess, str, dict]:
-    """A short mission flown by ``hrlsac mission run`` against ``hrlsac sitl`` as its own process, over real UDP in
-    real time; returns the command's result, the vehicle's log and the mission report."""
+VEHICLE_UP_FIRST_S = 5.0
+"""The real-UDP flights start the vehicle this long before the runner (and it says it booted 10 minutes earlier):
+the runner meets an autopilot whose clock is far ahead of its own, as on a real vehicle."""
+
+
+def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str = "px4"
+                             ) -> tuple[subprocess.CompletedProcess, str, dict]:
+    """A short mission flown by ``hrlsac mission run`` against ``hrlsac sitl`` as its own process (started
+    VEHICLE_UP_FIRST_S earlier, with PX4's or ArduPilot's own default stream rates), over real UDP in real time;
+    returns the command's result, the vehicle's log and the mission report."""
     mission = small_mission(altitude_m=10.0, max_steps=10)
     path = tmp_path / "short.yaml"
     save_mission(mission, path)
     home = mission.scenario.home
     api_port, api_remote = free_udp_ports(2)
+    personality = ["--autopilot", "ardupilot", "--tcp-port", "0", "--param", "RTL_ALT=1200"] if autopilot == "ardupilot" \
+        else ["--telemetry-profile", "px4", "--param", "RTL_RETURN_ALT=12"]
     sitl = subprocess.Popen([*HRLSAC, "sitl", "--api-port", str(api_port), "--api-remote", str(api_remote),
                              "--gcs-remote", "0", "--home", f"{home.lat_deg},{home.lon_deg},{home.alt_m}",
-                             "--param", "RTL_RETURN_ALT=12"],
+                             "--boot-time", "600", *personality],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
+        time.sleep(VEHICLE_UP_FIRST_S)
+        assert sitl.poll() is None, sitl.communicate()
         result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--policy", str(policy.path),
                                  "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out"),
                                  "--accept-flight-mismatch", *extra], capture_output=True, text=True, timeout=240)
@@ -282,10 +294,15 @@ def fly_against_sitl_process(policy, tmp_path: Path, *extra: str) -> tuple[subpr
 
 
 @pytest.mark.slow
-def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path):
-    _, _, report = fly_against_sitl_process(policy, tmp_path)
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path, autopilot):
+    _, _, report = fly_against_sitl_process(policy, tmp_path, autopilot=autopilot)
     assert [t["to"] for t in report["transitions"]] == ALL_STATES
+    assert report["autopilot"] == {"px4": "PX4", "ardupilot": "ArduPilot Copter"}[autopilot]
     assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
+    # The vehicle's clock is 600 s plus the head start ahead of the runner's: one time base all the same.
+    assert report["vehicle_time"]["offset_s"] < -600.0 - VEHICLE_UP_FIRST_S + 1.0
+    assert report["vehicle_time"]["timeline_changes"] == 0 and report["estimator"]["reinitialisations"] == 0
     setpoints = ours(read_tlog(tmp_path / "out" / "flight.tlog"), "SET_POSITION_TARGET_LOCAL_NED")
     assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
 

@@ -1,0 +1,130 @@
+"""The runner against both autopilot personalities, and against vehicles that do not share its clock.
+
+Lockstep replays: the real runner against the simulated vehicle (PX4 or ArduPilot Copter personality) over the
+in-memory MAVLink link; the tlog is read back with pymavlink. The ArduPilot rules the runner follows (GUIDED before
+arming, NAV_TAKEOFF's param7 above home, streams to request, GUID_TIMEOUT, the GCS failsafe) are the ones
+docs/sitl.md cites from ArduPilot's source; the vehicle options (boot long before the runner, reboot mid-flight)
+are the realism options of the flight-side issue.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from autonomy.policy import Policy, load_policy
+from autonomy.replay import airframe_for, replay_mission
+from sitl_bridge.faults import parse_link_faults
+from sitl_bridge.vehicle import VehicleConfig
+from test_runner import ours, read_tlog, small_mission
+
+PRETRAINED = "policies/pretrained/hrl-sac.pt"
+ALL_STATES = ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]
+
+
+@pytest.fixture(scope="module")
+def policy() -> Policy:
+    return load_policy(PRETRAINED)
+
+
+def fly(policy: Policy, autopilot: str, tmp_path=None, faults: str = "", **vehicle) -> dict:
+    mission = small_mission()
+    config = VehicleConfig(home=mission.launch_point, seed=5, airframe=airframe_for(mission), autopilot=autopilot,
+                           **vehicle)
+    return replay_mission(mission, policy, seed=5, out=tmp_path, video=False, vehicle_config=config,
+                          link_faults=parse_link_faults(faults) if faults else None)
+
+
+def states(report: dict) -> list[str]:
+    return [t["to"] for t in report["transitions"]]
+
+
+def events(report: dict, kind: str) -> list[str]:
+    return [e["reason"] for e in report["events"] if e["event"] == kind]
+
+
+# ---------------------------------------------------------------------------------------- ArduPilot Copter
+def test_the_runner_flies_ardupilot_in_guided_with_its_own_take_off_and_streams(policy, tmp_path):
+    report = fly(policy, "ardupilot", tmp_path)
+    assert states(report) == ALL_STATES and report["autopilot"] == "ArduPilot Copter"
+    assert report["transitions"][1]["reason"] == "vehicle 1/1 (MAV_AUTOPILOT_ARDUPILOTMEGA), flown as ArduPilot Copter"
+    assert report["transitions"][5]["reason"].startswith("GUIDED after ")
+    assert report["outcome"]["outcome"] == "completed" and report["outcome"]["vehicle_end"] == "landed and disarmed"
+    commands = [(m.command, m.param1, m.param2, m.param7) for m in ours(read_tlog(tmp_path / "flight.tlog"),
+                                                                         "COMMAND_LONG")]
+    kinds = [c[0] for c in commands]
+    # Streams first (ArduPilot's SRn rates are 0), then GUIDED (mode 4) before arming, then a take-off to 20 m above
+    # home (ArduPilot's param7 is relative, PX4's AMSL), GUIDED again for the search, finally RTL.
+    assert commands[0][:2] == (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
+    assert (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HOME_POSITION) in [c[:2] for c in commands]
+    arm = kinds.index(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+    assert commands[arm - 1][:3] == (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+    takeoff = commands[kinds.index(mavlink.MAV_CMD_NAV_TAKEOFF)]
+    assert takeoff[3] == pytest.approx(small_mission().flight.altitude_m)
+    assert kinds[-1] == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+
+
+def test_px4_gets_an_amsl_take_off_and_no_mode_request_before_arming(policy, tmp_path):
+    report = fly(policy, "px4", tmp_path)
+    assert states(report) == ALL_STATES and report["autopilot"] == "PX4"
+    commands = [(m.command, m.param7) for m in ours(read_tlog(tmp_path / "flight.tlog"), "COMMAND_LONG")]
+    kinds = [c[0] for c in commands]
+    assert mavlink.MAV_CMD_DO_SET_MODE not in kinds[:kinds.index(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)]
+    takeoff = commands[kinds.index(mavlink.MAV_CMD_NAV_TAKEOFF)]
+    assert takeoff[1] == pytest.approx(small_mission().launch_point.alt_m + small_mission().flight.altitude_m, abs=0.01)
+
+
+def test_ardupilot_stops_in_guided_during_a_ten_second_outage_and_the_search_carries_on(policy):
+    report = fly(policy, "ardupilot", faults="outage=20:10")
+    assert events(report, "link") == ["no telemetry for 1 s: holding position",
+                                      "telemetry lost for 3.0 s: waiting up to 60 s for it to come back"]
+    assert events(report, "resume") == [] and report["failsafes"] == []  # GUID_TIMEOUT: no mode change
+    assert report["search_end"] == "step limit" and report["outcome"]["outcome"] == "completed"
+    assert report["outcome"]["longest_offboard_setpoint_gap_s"] > 9.0  # it really flew without setpoints
+
+
+def test_ardupilots_gcs_failsafe_rtl_is_resumed_from(policy):
+    """With the companion computer as ArduPilot's GCS (SYSID_MYGCS = its system id, 1) and the GCS failsafe on, an
+    outage longer than FS_GCS_TIMEOUT (5 s) makes the vehicle return; the runner takes it back into GUIDED."""
+    report = fly(policy, "ardupilot", faults="outage=20:10", params={"FS_GCS_ENABLE": 1, "SYSID_MYGCS": 1})
+    assert [f["reason"] for f in report["outcome"]["vehicle_failsafes"]] == ["GCS Failsafe"]
+    (resume,) = events(report, "resume")
+    assert resume.startswith("the vehicle's link-loss failsafe switched it to RTL (the link was lost for 10.1 s")
+    assert states(report)[5:8] == ["SEARCH", "OFFBOARD", "SEARCH"] and report["search_end"] == "step limit"
+    assert report["outcome"]["outcome"] == "completed"
+
+
+# ---------------------------------------------------------------------------------------- one time base
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_vehicle_booted_ten_minutes_before_the_runner_is_flown_on_the_runners_clock(policy, autopilot):
+    report = fly(policy, autopilot, boot_time_s=600.0)
+    assert report["vehicle_time"]["offset_s"] == pytest.approx(-600.0, abs=0.02)
+    assert report["vehicle_time"]["timeline_changes"] == 0 and report["estimator"]["reinitialisations"] == 0
+    assert report["outcome"]["outcome"] == "completed" and report["search_end"] == "step limit"
+    # the pose the policy got moves on every step (no prediction skipped): consecutive decisions at 1 s apart
+    path = report["trajectory"]
+    assert len(path) >= 30 and all(b[0] - a[0] == pytest.approx(1.0, abs=0.02) for a, b in zip(path[2:], path[3:]))
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_reboot_in_the_air_ends_the_search_without_acting_on_an_extrapolated_pose(policy, autopilot):
+    """The autopilot reboots 10 s into the search and is silent for 20 s; it falls (motors off). The runner holds,
+    never decides or guards on the pose extrapolated over the gap, and ends the search on the disarmed vehicle."""
+    report = fly(policy, autopilot, boot_time_s=600.0, reboot_at_s=27.0, reboot_downtime_s=20.0)
+    assert report["search_end"] == "vehicle disarmed" and states(report)[-2:] == ["SEARCH", "DONE"]
+    assert events(report, "failsafe") == ["the vehicle is disarmed"]
+    assert events(report, "geofence") == []
+    path = report["trajectory"]
+    assert all(b[0] < 27.0 + 1.05 for b in path)  # no decision once the link has been silent for gap_s (1 s)
+    steps = [math.dist(a[1:], b[1:]) for a, b in zip(path, path[1:])]
+    assert max(steps) <= small_mission().flight.max_speed_mps * 1.2
+    assert report["outcome"]["outcome"] == "ditched"  # a reboot in the air is the loss of the drone
+
+
+def test_a_reboot_on_the_ground_before_arming_restarts_the_estimate_and_the_mission_flies(policy):
+    report = fly(policy, "px4", boot_time_s=600.0, reboot_at_s=0.5, reboot_downtime_s=5.0)
+    change = report["vehicle_time"]["last_change"]
+    assert report["vehicle_time"]["timeline_changes"] == 1 and change.startswith("vehicle rebooted: time_boot_ms 600.")
+    assert report["estimator"]["reinitialisations"] == 1
+    assert states(report) == ALL_STATES and report["outcome"]["outcome"] == "completed"
