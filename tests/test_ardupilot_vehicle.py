@@ -417,3 +417,13 @@ def test_flight_status_is_the_neutral_view():
     assert pilot.vehicle.autopilot.status.phase == "holding"
     pilot.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
     assert pilot.vehicle.autopilot.status.phase == "returning"
+
+
+def test_stabilize_in_the_air_without_a_pilot_cuts_the_thrust():
+    """No RC input means throttle low: switching a flying copter to STABILIZE drops it (what really happens)."""
+    pilot = airborne(alt_m=12.0)
+    assert pilot.set_mode(CopterMode.STABILIZE) == ACCEPTED
+    assert pilot.vehicle.autopilot.status.phase == "manual" and not pilot.vehicle.autopilot.motors_running
+    fly(pilot, 1.0)
+    assert pilot.vehicle.state.vd_mps > 5.0  # falling
+    pilot.wait_for(lambda: pilot.vehicle.state.on_ground, 5, "the ground")

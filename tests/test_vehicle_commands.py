@@ -177,3 +177,24 @@ def test_commands_for_other_systems_are_not_answered(pilot):
         pilot.step()
     assert not any(m.get_type() == "COMMAND_ACK" for m in pilot.received)
     assert not pilot.vehicle.autopilot.armed
+
+
+def test_flight_status_is_the_neutral_view_of_px4_modes(pilot):
+    autopilot = pilot.vehicle.autopilot
+    assert (autopilot.status.phase, autopilot.status.mode_name) == ("on_ground", "HOLD")
+    pilot.set_param("MIS_TAKEOFF_ALT", 6.0)
+    pilot.command(ARM, 1)
+    pilot.command(mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+    pilot.vehicle.run(1.0)
+    assert autopilot.status.phase == "taking_off"
+    pilot.wait_for(lambda: autopilot.mode is FlightMode.HOLD, 20.0, "takeoff")
+    assert autopilot.status.phase == "holding"
+    pilot.send_velocity(1.0, 0.0, 0.0)
+    assert pilot.set_mode(FlightMode.OFFBOARD) == ACCEPTED
+    status = autopilot.status
+    assert (status.phase, status.mode_name, status.setpoint_timeout_s) == ("guided", "OFFBOARD", 1.0)
+    assert status.companion_in_control and status.last_setpoint_s == autopilot.setpoint.time_s
+    assert pilot.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == ACCEPTED
+    assert autopilot.status.phase == "returning"
+    assert pilot.command(mavlink.MAV_CMD_NAV_LAND) == ACCEPTED
+    assert autopilot.status.phase == "landing"
