@@ -14,6 +14,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	# MAVProxy without its declared dependencies: on Linux they pull vtk and the GUI opencv-python, which would
+	# replace opencv-python-headless; the ones its command line needs are in the test extra (pyproject.toml).
+	$(BIN)/python -m pip install --quiet --no-deps MAVProxy==1.8.75
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -12,7 +12,7 @@ import sys
 
 # name -> (module implementing ``main(argv, prog)``, one-line summary for ``hrlsac --help``)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "sitl": ("sitl_bridge.cli", "run the simulated PX4-like multirotor and wait for MAVLink clients"),
+    "sitl": ("sitl_bridge.cli", "run the simulated multirotor (PX4 or ArduPilot) and wait for MAVLink clients"),
     "demo": ("sitl_bridge.scripted_flight", "fly a short scripted mission in the simulated vehicle and report"),
     "train": ("policies.train_cli", "train HRL-SAC or flat SAC on the search environment (resumable)"),
     "sweep": ("policies.sweep_cli", "train a grid of runs (algorithm x preset x seed x hyper-parameters) on Ray"),
