@@ -45,8 +45,8 @@ from missions.mission import Mission
 
 __all__ = ["Clock", "MissionAborted", "MissionRunner", "RunnerConfig", "WallClock", "receive_telemetry"]
 
-HOME_REQUEST_PERIOD_S = 2.0  # HOME_POSITION is asked for again this often until it arrives (ArduPilot sends it
-# on request only)
+POSITION_RATE_HZ = 10.0
+STREAM_REQUEST_PERIOD_S = 2.0  # before arming, missing streams and HOME_POSITION are asked for again this often
 STATES = ("CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE")
 
 
@@ -76,6 +76,7 @@ class MissionRunner:
         self._texts_seen = 0
         self._link_back_s = -math.inf  # when telemetry last came back after a silence (decisions restart then)
         self._waiting_reported = False
+        self._positions_seen_s: float | None = None
         self.state: str | None = None
         self.transitions: list[dict] = []
         self.events: list[dict] = []
@@ -103,8 +104,10 @@ class MissionRunner:
     def tick(self) -> None:
         """One control tick: telemetry in, heartbeat and setpoints out. States call it while they wait."""
         self.clock.advance()
-        receive_telemetry(self.link, self.estimator, self.boot_time)
+        messages = receive_telemetry(self.link, self.estimator, self.boot_time)
         now = self.clock.now()
+        if any(msg.get_type() == "GLOBAL_POSITION_INT" for msg in messages):
+            self._positions_seen_s = now
         texts = self.link.status_since(self._texts_seen)
         self._texts_seen = self.link.status_count
         was_down = self.link_loss.link_down()
@@ -179,14 +182,22 @@ class MissionRunner:
             raise MissionAborted(str(exc)) from None
         self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour)
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
-        self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0)
+
+    def _ask_for_telemetry(self) -> None:
+        """Ask for what has not arrived yet: the position stream (ArduPilot streams nothing until asked, and a
+        request is fire-and-forget: it may be lost), the battery (SYS_STATUS) and home (sent on request only)."""
+        now = self.clock.now()
+        if self._positions_seen_s is None or now - self._positions_seen_s > STREAM_REQUEST_PERIOD_S:
+            self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, POSITION_RATE_HZ)
+        if self.link.battery_percent() is None:
+            self.link.request_message_interval(mavlink.MAVLINK_MSG_ID_SYS_STATUS, 1.0)
+        if self.link.home_position() is None:
+            self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
 
     def _preflight(self) -> None:
-        ask_home = (HOME_REQUEST_PERIOD_S, lambda: self.link.home_position() is None
-                    and self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION))
         self.wait_until(lambda: self.estimator.converged and self.link.home_position() is not None,
                         self.config.preflight_timeout_s, "waiting for a converged position estimate and home",
-                        repeat=ask_home)
+                        repeat=(STREAM_REQUEST_PERIOD_S, self._ask_for_telemetry))
         home = self.link.home_position()
         problem = home_disagreement(self.mission, home, self.config.home_tolerance_m,
                                     self.config.home_altitude_tolerance_m)

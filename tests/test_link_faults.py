@@ -34,7 +34,7 @@ from test_runner import small_mission
 
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 TICK_S = 0.01
-SEARCH_START_S = 16.65  # the small mission's SEARCH begins here for seed 5 (tests below check it)
+SEARCH_START_S = 16.75  # the small mission's SEARCH begins here for seed 5 (tests below check it)
 LONGEST_OUTAGE_END_S = 25.0 + 10.0  # the outages below start 25 s into the flight and last up to 10 s
 
 
@@ -310,7 +310,7 @@ def test_a_two_second_outage_trips_the_vehicles_failsafe_and_the_runner_resumes_
 def test_a_ten_second_outage_is_waited_out_and_the_search_resumed_once_the_link_is_back(policy):
     report = fly(policy, "outage=25:10")
     outcome = report["outcome"]
-    assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.96, abs=0.02)
+    assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.0 + 1.0, abs=0.06)  # COM_OF_LOSS_T
     links = [(e["time_s"], e["reason"]) for e in report["events"] if e["event"] == "link"]
     assert links == [(pytest.approx(25.9, abs=0.1), "no telemetry for 1 s: holding position"),
                      (pytest.approx(27.9, abs=0.1), "telemetry lost for 3.0 s: waiting up to 60 s for it to come back")]
@@ -336,7 +336,7 @@ def test_the_runner_gives_up_on_the_return_after_link_recovery_s_and_the_vehicle
                                                             link_loss=LinkLossConfig(resume=False)))
     assert report["outcome"]["vehicle_end"] == "flying in POSCTL at 20 m"
     aborts = [e["reason"] for e in report["events"] if e["event"] == "abort"]
-    assert aborts == ["return to launch: no COMMAND_ACK for MAV_CMD_NAV_RETURN_TO_LAUNCH after 3 attempts"]
+    assert aborts == ["return to launch: no COMMAND_ACK for MAV_CMD_NAV_RETURN_TO_LAUNCH after 5 attempts"]
 
 
 def test_a_link_that_never_comes_back_ends_the_search_after_the_wait(policy):
@@ -468,7 +468,8 @@ def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, 
     mission = tmp_path / "small.yaml"
     save_mission(small_mission(), mission)
     code = mission_cli.main(["replay", str(mission), "--policy", PRETRAINED, "--seed", "5", "--no-video",
-                             "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2", "--accept-flight-mismatch"])
+                             "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2",
+                             "--accept-flight-mismatch"])
     assert code == 0
     out = capsys.readouterr().out
     assert "  outcome: completed (search ended: step limit); vehicle landed and disarmed" in out

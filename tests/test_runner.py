@@ -274,8 +274,8 @@ def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str
     save_mission(mission, path)
     home = mission.scenario.home
     api_port, api_remote = free_udp_ports(2)
-    personality = ["--autopilot", "ardupilot", "--tcp-port", "0", "--param", "RTL_ALT=1200"] if autopilot == "ardupilot" \
-        else ["--telemetry-profile", "px4", "--param", "RTL_RETURN_ALT=12"]
+    personality = {"ardupilot": ["--autopilot", "ardupilot", "--tcp-port", "0", "--param", "RTL_ALT=1200"],
+                   "px4": ["--telemetry-profile", "px4", "--param", "RTL_RETURN_ALT=12"]}[autopilot]
     sitl = subprocess.Popen([*HRLSAC, "sitl", "--api-port", str(api_port), "--api-remote", str(api_remote),
                              "--gcs-remote", "0", "--home", f"{home.lat_deg},{home.lon_deg},{home.alt_m}",
                              "--boot-time", "600", *personality],
