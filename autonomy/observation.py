@@ -1,10 +1,14 @@
-"""The observation builder: the paper's 276-value observation, shared by training and flight.
+"""The observation builders: the paper's 276-value observation (SarSearch-v0) and SarSearch-v1's 288 values,
+shared by training and flight.
 
-Both the gymnasium environment and the mission runner call :func:`build_observations` with what they know:
-the (filtered) pose, the point the agent is sent to, the search state (coverage, detections), the conditions
-and the current goal, never simulator internals. It works on a batch of N observations (N = 1 in flight).
+Both the gymnasium environment and the mission runner call the builder of their search state with what they
+know: the (filtered) pose, the point the agent is sent to, the search state, the conditions and the current goal,
+never simulator internals. They work on a batch of N observations (N = 1 in flight). A layout has a version
+(``ObservationLayout.version``), written into every policy artifact's manifest and checked by the runtime;
+``OBSERVATION_LAYOUT_VERSION`` (4) is the one the runtime flies, SarSearch-v1's. The goal one-hot always comes last,
+so the meta-controller's view is the first ``meta_dim`` values.
 
-Layout (``OBSERVATION_FIELDS``; version ``OBSERVATION_LAYOUT_VERSION``):
+Layout version 3 (SarSearch-v0, ``LAYOUT_V3``):
 
 ====================  ======  ====  ==========================================================================
 name                  offset  size  meaning
@@ -23,17 +27,34 @@ coverage              16      256   the 32 x 32 coverage grid averaged over 2 x 
 goal                  272     4     one-hot of the meta-controller's goal (all zero for flat SAC)
 ====================  ======  ====  ==========================================================================
 
-The meta-controller sees the first 272 values (everything but the goal).
+Layout version 4 (SarSearch-v1, ``LAYOUT_V4``): the first 16 values as in version 3, then
 
-Version 3 (this one) changed only the squashing scale of ``target_offset``, from 100 m to 20 m: with 100 m the
-offset to a sub-goal point a cell or two away (31-62 m, where the search's goals usually lie) was a short vector
-(0.24-0.38), and the learned low level flew slowly towards such points; with 20 m its length is 0.61-0.76 there
-(HRL-SAC seed 0, 100,000 steps: test success 58.2 % -> 72.6 %, sub-goal reachability 53.7 % -> 80.0 %,
-docs/results/README.md). Version 2 changed only ``target_offset`` too: version 1 held the target's absolute
-position, normalised like ``agent_position``. A goal-conditioned low level then has to subtract two inputs among
-276 to find its way, with a 15 m reach radius worth 1 % of the area; it reached 5 % of its sub-goals.
-The offset, squashed so that it resolves metres near the target and saturates far away, hands it the direction
-and the distance directly (docs/paper-notes.md).
+=======================  ======  ====  =======================================================================
+name                     offset  size  meaning
+=======================  ======  ====  =======================================================================
+belief                   16      256   the search belief (``missions.belief``) summed over 2 x 2 blocks, over 4 x
+                                       the prior's peak cell: 1 where the prior was most likely, 0 once searched
+energy_left              272     1     share of the sortie's endurance left
+return_cost              273     1     time to fly home at full speed, as a share of the endurance
+belief_remaining         274     1     the belief's sum: the chance, to the crew, that the victim is still unseen
+belief_peak_offset       275     2     to the most likely cell: offset / (distance + 200 m)
+candidate_offset         277     2     to the nearest unresolved candidate: offset / (distance + 200 m); 0 if none
+unresolved_candidates    279     1     unresolved reachable candidates / 4, at most 1
+candidate_plausibility   280     1     that candidate's cell belief at its sighting over the best cell's then
+confirmed                281     1     1 once a candidate was identified as the victim
+close_look               282     1     1 while the camera looks closely at a candidate (within the reach radius)
+altitude                 283     1     the camera's altitude over the search altitude
+goal                     284     4     one-hot of the meta-controller's goal (all zero for flat SAC)
+=======================  ======  ====  =======================================================================
+
+In version 4, ``time_progress`` still counts the step limit; ``energy_left`` and ``return_cost`` are what a crew
+would know of its endurance. Version 3 changed only the squashing scale of ``target_offset``, from 100 m to 20 m:
+with 100 m the offset to a sub-goal point a cell or two away (31-62 m, where the search's goals usually lie) was a
+short vector (0.24-0.38), and the learned low level flew slowly towards such points; with 20 m its length is
+0.61-0.76 there (HRL-SAC seed 0, 100,000 steps: test success 58.2 % -> 72.6 %, sub-goal reachability 53.7 % ->
+80.0 %, docs/results/README.md). Version 2 changed only ``target_offset`` too: version 1 held the target's
+absolute position, normalised like ``agent_position``. A goal-conditioned low level then has to subtract two
+inputs among 276 to find its way, with a 15 m reach radius worth 1 % of the area; it reached 5 % of its sub-goals.
 """
 from __future__ import annotations
 
@@ -44,9 +65,12 @@ import numpy as np
 from missions.goals import GOAL_NAMES, NO_GOAL  # noqa: F401  (re-exported: the runtime names goals from here)
 from missions.search import downsample_coverage
 
-OBSERVATION_LAYOUT_VERSION = 3
 TARGET_OFFSET_SCALE_M = 20.0
 """Distance at which ``target_offset`` has length 0.5."""
+PLAN_OFFSET_SCALE_M = 200.0
+"""Distance at which ``belief_peak_offset`` and ``candidate_offset`` have length 0.5 (they point farther)."""
+CANDIDATES_FULL_SCALE = 4.0
+"""``unresolved_candidates`` = count / this, at most 1."""
 
 
 @dataclass(frozen=True)
@@ -63,15 +87,53 @@ class ObservationField:
         return slice(self.offset, self.offset + self.size)
 
 
-def _layout(*fields: tuple[str, int, str]) -> tuple[ObservationField, ...]:
+@dataclass(frozen=True)
+class ObservationLayout:
+    """One version of the observation: its fields in order, the goal one-hot last."""
+
+    version: int
+    fields: tuple[ObservationField, ...]
+
+    @property
+    def by_name(self) -> dict[str, ObservationField]:
+        return {f.name: f for f in self.fields}
+
+    @property
+    def dim(self) -> int:
+        return sum(f.size for f in self.fields)
+
+    @property
+    def meta_dim(self) -> int:
+        """What the meta-controller sees: everything but the goal one-hot."""
+        return self.by_name["goal"].offset
+
+    @property
+    def low(self) -> np.ndarray:
+        low = np.zeros(self.dim, dtype=np.float32)
+        for f in self.fields:
+            if f.name.endswith("_offset"):  # the only signed fields
+                low[f.slice] = -1.0
+        return low
+
+    @property
+    def high(self) -> np.ndarray:
+        return np.ones(self.dim, dtype=np.float32)
+
+    def description(self) -> list[dict]:
+        """The layout as plain data, for policy manifests (checked at load time by the runtime)."""
+        return [{"name": f.name, "offset": f.offset, "size": f.size, "description": f.description}
+                for f in self.fields]
+
+
+def _layout(version: int, *fields: tuple[str, int, str]) -> ObservationLayout:
     out, offset = [], 0
     for name, size, description in fields:
         out.append(ObservationField(name, offset, size, description))
         offset += size
-    return tuple(out)
+    return ObservationLayout(version, tuple(out))
 
 
-OBSERVATION_FIELDS: tuple[ObservationField, ...] = _layout(
+_COMMON = (
     ("agent_position", 2, "drone (north, east) normalised to [0, 1] over the search area"),
     ("target_offset", 2, "(target - drone) / (distance + 20 m), north and east: direction and squashed distance "
                          "to the point the agent is sent to"),
@@ -82,29 +144,50 @@ OBSERVATION_FIELDS: tuple[ObservationField, ...] = _layout(
     ("visibility", 1, "visibility fraction in [0.3, 1]"),
     ("wind_speed", 1, "wind strength in [0, 1]"),
     ("detections", 6, "per category: detected this step (person, boat, life_jacket, debris, floating_object, swimmer)"),
-    ("coverage", 256, "32 x 32 coverage grid averaged over 2 x 2 blocks, row-major, north rows first"),
-    ("goal", 4, "one-hot meta-controller goal (ExploreArea, SearchSpecificLocation, TrackObject, ReturnToBase)"),
 )
+_GOAL = ("goal", 4, "one-hot meta-controller goal (ExploreArea, SearchSpecificLocation, TrackObject, ReturnToBase)")
+LAYOUT_V3 = _layout(3, *_COMMON, ("coverage", 256, "32 x 32 coverage grid averaged over 2 x 2 blocks, row-major, "
+                                                   "north rows first"), _GOAL)
+"""SarSearch-v0's 276 values (the paper's)."""
+LAYOUT_V4 = _layout(
+    4, *_COMMON,
+    ("belief", 256, "search belief summed over 2 x 2 blocks over 4 x the prior's peak cell, row-major, north rows "
+                    "first"),
+    ("energy_left", 1, "share of the sortie's endurance left"),
+    ("return_cost", 1, "time to fly home at full speed / endurance"),
+    ("belief_remaining", 1, "sum of the belief: chance the victim is still unseen"),
+    ("belief_peak_offset", 2, "(most likely cell - drone) / (distance + 200 m), north and east"),
+    ("candidate_offset", 2, "(nearest unresolved candidate - drone) / (distance + 200 m); 0 if none"),
+    ("unresolved_candidates", 1, "unresolved reachable candidates / 4, at most 1"),
+    ("candidate_plausibility", 1, "that candidate's cell belief at its sighting over the best cell's"),
+    ("confirmed", 1, "1 once a candidate was identified as the victim"),
+    ("close_look", 1, "1 while the camera looks closely at a candidate"),
+    ("altitude", 1, "camera altitude / search altitude"),
+    _GOAL)
+"""SarSearch-v1's 288 values."""
+LAYOUTS = {3: LAYOUT_V3, 4: LAYOUT_V4}
+_V4 = LAYOUT_V4.by_name
+OBSERVATION_LAYOUT_VERSION = 4
+"""The layout the runtime flies (SarSearch-v1's)."""
+OBSERVATION_FIELDS = LAYOUTS[OBSERVATION_LAYOUT_VERSION].fields
 FIELDS_BY_NAME = {f.name: f for f in OBSERVATION_FIELDS}
-_GOAL_INDICES = np.arange(FIELDS_BY_NAME["goal"].size)
-OBS_DIM = sum(f.size for f in OBSERVATION_FIELDS)  # 276
-META_OBS_DIM = FIELDS_BY_NAME["goal"].offset  # 272: the meta-controller's view
-OBSERVATION_LOW = np.zeros(OBS_DIM, dtype=np.float32)
-OBSERVATION_LOW[FIELDS_BY_NAME["target_offset"].slice] = -1.0  # the only signed field
-OBSERVATION_HIGH = np.ones(OBS_DIM, dtype=np.float32)
+OBS_DIM = LAYOUTS[OBSERVATION_LAYOUT_VERSION].dim  # 288
+META_OBS_DIM = LAYOUTS[OBSERVATION_LAYOUT_VERSION].meta_dim  # 284: the meta-controller's view
+OBSERVATION_LOW = LAYOUTS[OBSERVATION_LAYOUT_VERSION].low
+OBSERVATION_HIGH = LAYOUTS[OBSERVATION_LAYOUT_VERSION].high
+_GOAL_INDICES = np.arange(4)
 
 
 def layout_description() -> list[dict]:
-    """The layout as plain data, for policy manifests (checked at load time by the runtime)."""
-    return [{"name": f.name, "offset": f.offset, "size": f.size, "description": f.description}
-            for f in OBSERVATION_FIELDS]
+    """The runtime's layout as plain data, for policy manifests (checked at load time by the runtime)."""
+    return LAYOUTS[OBSERVATION_LAYOUT_VERSION].description()
 
 
 def build_observations(agent_ne: np.ndarray, target_ne: np.ndarray, area: np.ndarray, time_progress: np.ndarray,
                        sea: np.ndarray, weather: np.ndarray, time_of_day: np.ndarray, visibility: np.ndarray,
                        wind: np.ndarray, detections: np.ndarray, coverage_blocks: np.ndarray, goal: np.ndarray,
                        out: np.ndarray | None = None) -> np.ndarray:
-    """Fill (and return) the (N, 276) float32 observations.
+    """Fill (and return) the (N, 276) float32 observations of layout version 3 (SarSearch-v0).
 
     agent_ne, target_ne: (N, 2) metres in the local NED frame; area: (N, 4) north_min, north_max, east_min,
     east_max; time_progress, visibility, wind: (N,); sea, weather, time_of_day: (N,) enum values;
@@ -112,12 +195,22 @@ def build_observations(agent_ne: np.ndarray, target_ne: np.ndarray, area: np.nda
     """
     n = agent_ne.shape[0]
     if out is None:
-        out = np.empty((n, OBS_DIM), dtype=np.float32)
+        out = np.empty((n, LAYOUT_V3.dim), dtype=np.float32)
+    _fill_common(out, agent_ne, target_ne, area, time_progress, sea, weather, time_of_day, visibility, wind,
+                 detections)
+    out[:, 16:272] = coverage_blocks
+    out[:, 272:276] = goal[:, None] == _GOAL_INDICES  # NO_GOAL matches nothing: all zero
+    return out
+
+
+def _fill_common(out: np.ndarray, agent_ne: np.ndarray, target_ne: np.ndarray, area: np.ndarray,
+                 time_progress: np.ndarray, sea: np.ndarray, weather: np.ndarray, time_of_day: np.ndarray,
+                 visibility: np.ndarray, wind: np.ndarray, detections: np.ndarray) -> None:
+    """The first 16 values, the same in every layout."""
     origin = area[:, 0::2]  # (north_min, east_min)
     size = area[:, 1::2] - origin
     out[:, 0:2] = (agent_ne - origin) / size
-    offset = target_ne - agent_ne
-    out[:, 2:4] = offset / (np.hypot(offset[:, 0], offset[:, 1]) + TARGET_OFFSET_SCALE_M)[:, None]
+    out[:, 2:4] = squashed_offset(agent_ne, target_ne, TARGET_OFFSET_SCALE_M)
     out[:, 4] = time_progress
     out[:, 5] = sea * 0.5
     out[:, 6] = weather * (1.0 / 3.0)
@@ -125,16 +218,22 @@ def build_observations(agent_ne: np.ndarray, target_ne: np.ndarray, area: np.nda
     out[:, 8] = visibility
     out[:, 9] = wind
     out[:, 10:16] = detections
-    out[:, 16:272] = coverage_blocks
-    out[:, 272:276] = goal[:, None] == _GOAL_INDICES  # NO_GOAL matches nothing: all zero
-    return out
+
+
+def squashed_offset(agent_ne: np.ndarray, point_ne: np.ndarray, scale_m: float) -> np.ndarray:
+    """(N, 2) (point - agent) / (distance + scale_m): the direction, and a length that is 0.5 at scale_m."""
+    offset = point_ne - agent_ne
+    return offset / (np.hypot(offset[:, 0], offset[:, 1]) + scale_m)[:, None]
 
 
 def observe_search(state, goal_conditioned: bool, rows: np.ndarray | None = None,
                    out: np.ndarray | None = None) -> np.ndarray:
-    """The observations of a ``missions.search_state.SearchState`` (all searches, or ``rows``): what the
-    environment and the mission runner both give the policy. ``goal_conditioned``: HRL-SAC's target and goal
-    one-hot; otherwise flat SAC's (last detection / drifting datum, no goal)."""
+    """The observations of a search state (all searches, or ``rows``): what the environment and the mission
+    runner both give the policy. ``goal_conditioned``: HRL-SAC's target and goal one-hot; otherwise flat SAC's.
+    A ``missions.search_state.SearchState`` (SarSearch-v0) gives layout 3, a
+    ``missions.belief_search.BeliefSearchState`` (SarSearch-v1) layout 4."""
+    if hasattr(state, "belief"):
+        return _observe_belief_search(state, goal_conditioned, rows, out)
     rows = slice(None) if rows is None else rows
     scen = state.scen
     goal = state.goal[rows] if goal_conditioned else np.full(len(state.goal[rows]), NO_GOAL)
@@ -142,3 +241,41 @@ def observe_search(state, goal_conditioned: bool, rows: np.ndarray | None = None
                               state.steps[rows] / state.flight.max_steps, scen.sea[rows], scen.weather[rows],
                               scen.time_of_day[rows], scen.visibility[rows], scen.wind[rows],
                               state.detections[rows], downsample_coverage(state.coverage[rows]), goal, out=out)
+
+
+def _observe_belief_search(state, goal_conditioned: bool, rows: np.ndarray | None,
+                           out: np.ndarray | None) -> np.ndarray:
+    rows = np.arange(state.n) if rows is None else np.asarray(rows)
+    scen, flight, n = state.scen, state.flight, len(rows)
+    if out is None:
+        out = np.empty((n, LAYOUT_V4.dim), dtype=np.float32)
+    position = state.position[rows]
+    _fill_common(out, position, state.target_position(goal_conditioned)[rows], scen.area[rows],
+                 state.steps[rows] / flight.max_steps, scen.sea[rows], scen.weather[rows], scen.time_of_day[rows],
+                 scen.visibility[rows], scen.wind[rows], state.detections[rows])
+    belief = state.belief[rows]
+
+    def put(name: str, values: np.ndarray) -> None:
+        out[:, _V4[name].slice] = np.reshape(values, (n, -1))
+
+    put("belief", np.minimum(downsample_coverage(belief) / state.prior_peak[rows, None], 1.0))
+    put("energy_left", state.energy_left[rows])
+    home_s = np.hypot(*(position - scen.start[rows]).T) / flight.max_speed_mps
+    put("return_cost", np.minimum(home_s / scen.endurance_s[rows], 1.0))
+    put("belief_remaining", belief.sum(axis=(1, 2)))
+    peak = np.stack(np.divmod(belief.reshape(n, -1).argmax(axis=1), belief.shape[2]), axis=1) + 0.5
+    cell_m = (scen.area[rows, 1::2] - scen.area[rows, 0::2]) / belief.shape[1]
+    peak_ne = scen.area[rows, 0::2] + state.belief_offset[rows] + peak * cell_m
+    put("belief_peak_offset", squashed_offset(position, peak_ne, PLAN_OFFSET_SCALE_M))
+    estimates, kind = state.candidate_estimates()[rows], state.candidate_kind()[rows]
+    distance = np.where(kind == 1, np.hypot(*(estimates - position[:, None, :]).transpose(2, 0, 1)), np.inf)
+    nearest, unresolved = distance.argmin(axis=1), np.isfinite(distance.min(axis=1))
+    put("candidate_offset", squashed_offset(position, estimates[np.arange(n), nearest], PLAN_OFFSET_SCALE_M)
+        * unresolved[:, None])
+    put("unresolved_candidates", np.minimum((kind == 1).sum(axis=1) / CANDIDATES_FULL_SCALE, 1.0))
+    put("candidate_plausibility", state.plausibility[rows][np.arange(n), nearest] * unresolved)
+    put("confirmed", (kind == 2).any(axis=1))
+    put("close_look", state.close_look()[rows])
+    put("altitude", state.altitude[rows] / flight.altitude_m)
+    put("goal", (state.goal[rows] if goal_conditioned else np.full(n, NO_GOAL))[:, None] == _GOAL_INDICES)
+    return out

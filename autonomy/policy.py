@@ -68,11 +68,11 @@ class Policy:
         return self.hierarchical and step % self.manifest.subgoal_interval == 0
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
-        """(N, 272) or (272,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""
+        """(N, 284) or (284,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""
         return self._run(self._select_goal, meta_obs, META_OBS_DIM)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """(N, 276) or (276,) raw observations -> actions (N, 4) or (4,), float32, in the action ranges."""
+        """(N, 288) or (288,) raw observations -> actions (N, 4) or (4,), float32, in the action ranges."""
         return self._run(self._act, obs, OBS_DIM)
 
     @staticmethod

@@ -1,18 +1,22 @@
 """The search brain of the mission runner: one policy decision per step, from the filtered pose.
 
 Each decision step (``FlightSettings.step_period_s``) the runner hands :meth:`SearchPilot.decide` the drone's
-filtered (north, east) in the mission frame. The pilot then does exactly what the training environment does
-after its dynamics step (the same ``missions.search_state.SearchState``, the same observation builder):
+filtered (north, east) in the mission frame. The pilot then does exactly what the training environment
+(SarSearch-v1) does after its dynamics step, with the same ``missions.belief_search.BeliefSearchState`` (belief,
+candidates, confirmation rule, endurance) and the same observation builder:
 
-1. advance the search state to that position with the sensor settings of the previous decision: drift,
-   coverage, detections by the simulated camera (the mission's objects and the detection model, with draws
-   keyed by the mission seed), end conditions;
+1. advance the search state to that position with the sensor settings of the previous decision: the camera's
+   modelled altitude, drift, the belief, sightings by the simulated camera (the mission's objects and the detection
+   model, with draws keyed by the mission seed), close looks and their identifications, end conditions;
 2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
 3. act on the observation: movement north/east in [-1, 1] scaled to the mission's speed limit, search
-   intensity and camera zoom in [0, 1].
+   intensity and camera zoom in [0, 1]; during a close look, :attr:`Decision.altitude_m` asks the runner for the
+   close-look altitude (the search state's ``altitude_target``), which it flies with vertical velocity.
 
 The camera is simulated in every mode, also against a real autopilot: a real payload would feed its
-detections here instead (not built; see docs/runner.md).
+detections here instead (not built; see docs/runner.md). The search state models the camera's altitude itself
+(descent and climb at the rates of ``missions.belief_search``), so the runner's altitude controller need not match
+it to the metre.
 """
 from __future__ import annotations
 
@@ -20,12 +24,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.observation import observe_search
+from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
+from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
 from missions.search import ScenarioBatch
-from missions.search_state import SearchState
+
+END_REASONS = ("victim reached", "return to base", "returned home", "endurance exhausted", "step limit",
+               "entered a danger zone", "left the geofence")
+"""Why a search ends (``Decision.end``); "victim reached" is the one success: the victim confirmed by a close look
+and within the reach radius."""
 
 
 @dataclass(frozen=True)
@@ -43,10 +52,14 @@ class Decision:
     new_goal: bool
     """Whether the meta-controller decided this step."""
     end: str | None = None
-    """None while searching; else "victim reached", "return to base", "step limit", "entered a danger zone"
-    or "left the geofence"."""
+    """None while searching; else one of END_REASONS: "victim reached" (the one success), "return to base" (the
+    meta-controller chose ReturnToBase), "returned home" (a flat policy came back over home), "endurance exhausted"
+    (the sortie's endurance is used up), "step limit", "entered a danger zone" or "left the geofence"."""
     action: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     """The policy's raw action (NaN if it returned one: the runner's guard decides)."""
+    altitude_m: float | None = None
+    """Altitude above home this step asks for: the close-look altitude while the camera looks closely at a
+    candidate; None = the mission's ``FlightSettings.altitude_m``."""
 
 
 class SearchPilot:
@@ -56,8 +69,10 @@ class SearchPilot:
         self.mission, self.policy = mission, policy
         self.flight = mission.flight
         self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
-        scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence])
-        self.state = SearchState(scen, self.flight)
+        # padded to the training environment's slots: the detection draws are keyed by slot
+        scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence],
+                                            num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))
+        self.state = BeliefSearchState(scen, self.flight)
         self.state.reset(np.array([0]), np.array([seed], dtype=np.uint64))
         self.intensity = np.zeros(1)
         self.zoom = np.zeros(1)
@@ -85,7 +100,7 @@ class SearchPilot:
         new_goal = False
         if end is None and self.policy.hierarchical and self.step % self.subgoal_interval == 0:
             self._close_segment()
-            goal = int(self.policy.select_goal(observe_search(state, True)[0, :272]))
+            goal = int(self.policy.select_goal(observe_search(state, True)[0, :LAYOUT_V4.meta_dim]))
             state.set_goals(np.array([goal]))
             new_goal = True
             if goal == RETURN_TO_BASE:
@@ -98,17 +113,18 @@ class SearchPilot:
         if finite:
             self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
         movement = np.clip(action[:2], -1.0, 1.0) * self.flight.max_speed_mps if finite else np.array([np.nan] * 2)
+        target = float(state.altitude_target[0])
         return Decision(self.step, (float(movement[0]), float(movement[1])), float(self.intensity[0]),
                         float(self.zoom[0]), int(state.goal[0]), tuple(state.goal_point[0].tolist()), new_goal,
-                        end, tuple(float(a) for a in action))
+                        end, tuple(float(a) for a in action),
+                        None if target == self.flight.altitude_m else target)
 
     def _end_reason(self, out) -> str | None:
-        if out.success[0]:
-            return "victim reached"
-        if out.collision[0]:
-            return "entered a danger zone"
-        if out.out_of_bounds[0]:
-            return "left the geofence"
+        for ended, reason in ((out.success, "victim reached"), (out.collision, "entered a danger zone"),
+                              (out.out_of_bounds, "left the geofence"), (out.returned, "returned home"),
+                              (out.ran_dry, "endurance exhausted")):
+            if ended[0]:
+                return reason
         if self.step >= self.flight.max_steps:
             return "step limit"
         return None
@@ -126,6 +142,9 @@ class SearchPilot:
         return {
             "steps": self.step,
             "victim_detected": bool(state.has_detection[0]),
+            "victim_confirmed": bool(state.status[0, state.scen.primary_index[0]] == CONFIRMED),
+            "candidates_rejected": int((state.status[0] == REJECTED).sum()),
+            "energy_left": float(state.energy_left[0]),
             "first_detection_step": first if first >= 0 else None,
             "time_to_detection_s": first * self.flight.step_period_s if first >= 0 else None,
             "coverage_ratio": float(state.coverage_ratio[0]),

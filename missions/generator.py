@@ -20,6 +20,10 @@ What a generated scenario looks like (defaults of :class:`GeneratorConfig`):
   (mostly light, mean 0.29 = 4.3 m/s), blowing towards a uniform direction; a current of 0-0.3 m/s
   (uniform) towards a uniform direction.
 
+SarSearch-v1 (``TASK_V1``) adds, drawn after everything above so that the rest of a seed's scenario is its v0
+scenario: decoys (objects of the victim's category around the datum), a sortie endurance and an error in the
+current forecast.
+
 Splits: seeds are disjoint integer ranges, ``SPLIT_SEED_STRIDE`` apart: train 0, 1, 2, ...; val
 1,000,000,000 + i; test 2,000,000,000 + i. The first k seeds of a split are the same whatever count is asked
 for, and a scenario's name tells where it came from: seed 2,000,000,017 is ``gen-test-000017``.
@@ -90,6 +94,21 @@ class GeneratorConfig:
     """Second Beta parameter of the wind strength. Allowed (0, 100]."""
     max_current_mps: float = 0.3
     """Sea current speed is uniform in [0, max] (m/s). Allowed [0, 3]."""
+    decoys_min: int = 0
+    """Least number of decoys: objects of the victim's own category that are not the victim (other people's life
+    jackets, a second swimmer, look-alike debris), which only a close look tells apart. Allowed [0, decoys_max]."""
+    decoys_max: int = 0
+    """Most decoys; the count is uniform in [decoys_min, decoys_max]. 0 = none (SarSearch-v0). Allowed [0, 20]."""
+    decoy_spread_sigmas: float = 2.5
+    """Decoys are drawn normally around the datum with this many datum sigmas per axis (a debris field around the
+    incident), clipped inside the area and kept ``obstacle_clearance_m`` from danger zones. Allowed [0.1, 20]."""
+    endurance_min_s: float = 0.0
+    """Shortest sortie endurance (s); endurance_s is uniform in [min, max]. Allowed [0, endurance_max_s]."""
+    endurance_max_s: float = 0.0
+    """Longest sortie endurance (s); 0 = unlimited (SarSearch-v0). Allowed 0 or [60, 1e5]."""
+    forecast_error_mps: float = 0.0
+    """1-sigma error of the crew's current forecast, per axis (m/s): the datum and the belief drift with the
+    forecast, the objects with the true current. 0 = an exact forecast (SarSearch-v0). Allowed [0, 1]."""
 
     def __post_init__(self) -> None:
         half = self.area_size_m / 2.0 if isinstance(self.area_size_m, (int, float)) else math.nan
@@ -103,7 +122,9 @@ class GeneratorConfig:
             ("obstacle_clearance_m", 0.0, 1000.0, True), ("visibility_min", 0.3, 1.0, True),
             ("visibility_max", self.visibility_min, 1.0, True), ("fog_visibility_max", self.visibility_min, 1.0, True),
             ("wind_beta_a", 0.0, 100.0, True), ("wind_beta_b", 0.0, 100.0, True),
-            ("max_current_mps", 0.0, 3.0, True),
+            ("max_current_mps", 0.0, 3.0, True), ("decoys_max", 0, 20, True), ("decoys_min", 0, self.decoys_max, True),
+            ("decoy_spread_sigmas", 0.1, 20.0, True), ("endurance_max_s", 0.0, 1e5, True),
+            ("endurance_min_s", 0.0, self.endurance_max_s, True), ("forecast_error_mps", 0.0, 1.0, True),
         )
         for name, low, high, high_included in checks:
             value = getattr(self, name)
@@ -111,11 +132,14 @@ class GeneratorConfig:
                   and low <= value and (value <= high if high_included else value < high))
             if name.startswith("wind_beta") and ok:
                 ok = value > 0.0  # Beta parameters are strictly positive
-            if ok and name.startswith("max_") and name != "max_current_mps":
+            if ok and (name.startswith("max_") and name != "max_current_mps" or name.startswith("decoys_")):
                 ok = int(value) == value
             if not ok:
                 bracket = "]" if high_included else ")"
                 raise ValueError(f"GeneratorConfig.{name} must be in [{low:g}, {high:g}{bracket}, got {value!r}")
+        if 0.0 < self.endurance_max_s < 60.0:
+            raise ValueError(f"GeneratorConfig.endurance_max_s must be 0 (unlimited) or in [60, 100000], "
+                             f"got {self.endurance_max_s!r}")
         if not self.primary_categories or any(c not in CATEGORIES for c in self.primary_categories):
             raise ValueError(f"GeneratorConfig.primary_categories must be a non-empty subset of "
                              f"{', '.join(CATEGORIES)}, got {self.primary_categories!r}")
@@ -131,6 +155,12 @@ class GeneratorConfig:
         """The search area in the local frame of home (home at north 0, east 0)."""
         return SearchArea(north_min_m=-self.home_inset_m, north_max_m=self.area_size_m - self.home_inset_m,
                           east_min_m=-self.area_size_m / 2.0, east_max_m=self.area_size_m / 2.0)
+
+
+TASK_V1 = GeneratorConfig(decoys_min=1, decoys_max=4, endurance_min_s=600.0, endurance_max_s=900.0,
+                          forecast_error_mps=0.05)
+"""The scenario distribution of SarSearch-v1: the standard one plus 1-4 decoys around the datum, a sortie
+endurance of 600-900 s and a current forecast off by 0.05 m/s per axis (1 sigma); see docs/environment.md."""
 
 
 def scenario_seeds(split: str, count: int) -> list[int]:
@@ -198,12 +228,44 @@ def generate_scenario(seed: int, config: GeneratorConfig = GeneratorConfig()) ->
         if obstacle is not None:
             obstacles.append(obstacle)
 
+    conditions, current = _draw_conditions(rng, config), _draw_current(rng, config)
+    # SarSearch-v1's draws come last, so that a config without them gives exactly the v0 scenario of the seed.
+    targets += _draw_decoys(rng, area, datum, sigma, primary_category, obstacles, config)
+    endurance = (float(rng.uniform(config.endurance_min_s, config.endurance_max_s))
+                 if config.endurance_max_s > 0.0 else None)
+    forecast = {}
+    if config.forecast_error_mps > 0.0:
+        error = config.forecast_error_mps * rng.standard_normal(2)
+        forecast = {"forecast_current_north_mps": current["current_north_mps"] + float(error[0]),
+                    "forecast_current_east_mps": current["current_east_mps"] + float(error[1])}
     return Scenario(
         area=area, start_north_m=start[0], start_east_m=start[1],
         datum_north_m=datum[0], datum_east_m=datum[1], datum_sigma_m=sigma,
-        targets=tuple(targets), obstacles=tuple(obstacles), conditions=_draw_conditions(rng, config),
-        **_draw_current(rng, config), seed=seed, name=scenario_name(seed),
+        targets=tuple(targets), obstacles=tuple(obstacles), conditions=conditions,
+        **current, **forecast, endurance_s=endurance, seed=seed, name=scenario_name(seed),
     )
+
+
+def _draw_decoys(rng: np.random.Generator, area: SearchArea, datum: tuple[float, float], sigma: float,
+                 category: str, obstacles: list[Obstacle], config: GeneratorConfig) -> list[Target]:
+    """Objects of the victim's category around the datum, away from the danger zones (a close look must be able
+    to reach them); a decoy with no clear place in ``_OBSTACLE_DRAWS`` draws is dropped."""
+    if config.decoys_max == 0:
+        return []
+    margin, spread = config.target_margin_m, config.decoy_spread_sigmas * sigma
+    zones = np.array([(o.north_m, o.east_m, o.radius_m) for o in obstacles]).reshape(-1, 3)
+    decoys = []
+    for _ in range(int(rng.integers(config.decoys_min, config.decoys_max + 1))):
+        for _ in range(_OBSTACLE_DRAWS):
+            north = float(np.clip(datum[0] + spread * rng.standard_normal(), area.north_min_m + margin,
+                                  area.north_max_m - margin))
+            east = float(np.clip(datum[1] + spread * rng.standard_normal(), area.east_min_m + margin,
+                                 area.east_max_m - margin))
+            gaps = np.hypot(zones[:, 0] - north, zones[:, 1] - east) - zones[:, 2]
+            if len(gaps) == 0 or gaps.min() >= config.obstacle_clearance_m:
+                decoys.append(Target(category, north, east))
+                break
+    return decoys
 
 
 def _uniform_point(rng: np.random.Generator, area: SearchArea, margin: float) -> tuple[float, float]:

@@ -184,3 +184,68 @@ def ground_goals(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, cover
     if obstacles is not None:
         point = route_around_hazards(agent_ne, point, obstacles, obstacle_valid, area)
     return point
+
+
+# ---------------------------------------------------------------------------------------------- SarSearch-v1
+
+BELIEF_FLOOR = 1e-12
+"""Cells with less belief than this count as searched out (SearchSpecificLocation falls back to the datum)."""
+
+
+def belief_point(agent_ne: np.ndarray, area: np.ndarray, belief: np.ndarray, offset: np.ndarray,
+                 fallback: np.ndarray) -> np.ndarray:
+    """SarSearch-v1's SearchSpecificLocation: the cell with the most belief per travel, log belief - distance /
+    TRAVEL_SCALE_M, at its centre where its water is now (``offset``, ``missions.belief``)."""
+    n, grid = belief.shape[0], belief.shape[1]
+    north, east = cell_centres(area, grid)
+    north, east = north + offset[:, 0:1], east + offset[:, 1:2]
+    log_score = np.log(np.maximum(belief, BELIEF_FLOOR)) - np.hypot(
+        north[:, :, None] - agent_ne[:, 0, None, None], east[:, None, :] - agent_ne[:, 1, None, None]) / TRAVEL_SCALE_M
+    score = np.where(belief > BELIEF_FLOOR, log_score, -np.inf)
+    point = _argmax_point(score, north, east)
+    exhausted = ~np.isfinite(score.reshape(n, -1).max(axis=1))
+    point[exhausted] = fallback[exhausted]
+    return point
+
+
+def candidate_point(agent_ne: np.ndarray, candidates: np.ndarray, kind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate TrackObject flies to: the confirmed victim if there is one, else the nearest unresolved one
+    (``kind`` (N, T): 0 none, 1 unresolved, 2 confirmed; ``candidates`` (N, T, 2) their estimates). Returns the
+    points (N, 2) and whether there was any (N,)."""
+    distance = np.hypot(*(candidates - agent_ne[:, None, :]).transpose(2, 0, 1))
+    score = np.where(kind == 0, np.inf, distance - 1e9 * (kind == 2))
+    best = score.argmin(axis=1)
+    return candidates[np.arange(len(best)), best], np.isfinite(score.min(axis=1, initial=np.inf))
+
+
+def ground_goals_v1(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, searched: np.ndarray,
+                    belief: np.ndarray, offset: np.ndarray, candidates: np.ndarray, kind: np.ndarray,
+                    datum: np.ndarray, home: np.ndarray, obstacles: np.ndarray,
+                    obstacle_valid: np.ndarray) -> np.ndarray:
+    """SarSearch-v1's goal points (N, 2) for goal indices (N,), from what a crew knows:
+
+    * ExploreArea: the most attractive unsearched 125 m block (``explore_point`` on the cumulative probability of
+      detection ``searched``, blind to the prior), or SearchSpecificLocation's point once all are searched;
+    * SearchSpecificLocation: ``belief_point``, the most belief per travel;
+    * TrackObject: ``candidate_point`` (the confirmed victim, else the nearest unresolved candidate), or without
+      one SearchSpecificLocation's point;
+    * ReturnToBase: home.
+
+    Points are kept ``FENCE_MARGIN_M`` inside the area and routed around the danger zones, as in SarSearch-v0."""
+    point = datum.copy()
+    tracked, has_candidate = candidate_point(agent_ne, candidates, kind)
+    track = (goal == TRACK_OBJECT) & has_candidate
+    needs_belief = (goal == EXPLORE) | (goal == SEARCH_LOCATION) | ((goal == TRACK_OBJECT) & ~has_candidate)
+    if needs_belief.any():
+        rows = needs_belief
+        point[rows] = belief_point(agent_ne[rows], area[rows], belief[rows], offset[rows], datum[rows])
+    explore = goal == EXPLORE
+    if explore.any():
+        blocks = explore_point(agent_ne[explore], area[explore], searched[explore], point[explore] - offset[explore])
+        point[explore] = blocks + offset[explore]
+    point[track] = tracked[track]
+    home_goal = goal == RETURN_TO_BASE
+    point[home_goal] = home[home_goal]
+    point[:, 0] = np.clip(point[:, 0], area[:, 0] + FENCE_MARGIN_M, area[:, 1] - FENCE_MARGIN_M)
+    point[:, 1] = np.clip(point[:, 1], area[:, 2] + FENCE_MARGIN_M, area[:, 3] - FENCE_MARGIN_M)
+    return route_around_hazards(agent_ne, point, obstacles, obstacle_valid, area)

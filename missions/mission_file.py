@@ -25,6 +25,9 @@ A mission file says how to fly (``flight``), where the drone may go (``geofence`
       conditions: {sea: calm, weather: clear, time_of_day: day, visibility: 0.9, wind: 0.2,
                    wind_direction_deg: 45}                              # optional, and each key
       current: {north_mps: 0.1, east_mps: 0.0}                          # optional (still water)
+      # current may add forecast_north_mps / forecast_east_mps: the current the crew's drift forecast assumes
+      # (optional; default the true one, an exact forecast)
+      endurance_s: 900                                                  # optional (unlimited): sortie endurance
       seed: 7                                                           # optional (0)
       name: hand-made                                                   # optional, informational
 
@@ -32,7 +35,9 @@ Instead of the inline fields, a scenario can be a reference:
 
 * ``generator: {split: test, index: 3}`` is scenario number 3 (from 0) of the generator's ``train``, ``val``
   or ``test`` split, i.e. ``generate_scenario(scenario_seeds(split, index + 1)[index])``;
-  ``generator: {seed: 12345}`` is ``generate_scenario(12345)``. Both are reproducible.
+  ``generator: {seed: 12345}`` is ``generate_scenario(12345)``. Both are reproducible. ``task: SarSearch-v1``
+  (optional, default ``SarSearch-v0``) draws from that task's distribution (``missions.generator.TASK_V1``:
+  decoys, an endurance, a forecast error).
 * ``dataset: {root: ../datasets/sar2, split: test, image: img_0042, seed: 0}`` is the scenario built from
   one labelled image of a YOLO-format dataset. ``root`` is relative to the folder of the mission file;
   ``image`` is the image's file name, with or without its extension; ``seed`` (optional, 0) is the dataset
@@ -84,7 +89,12 @@ GENERATOR_SPLITS: tuple[str, ...] = ("train", "val", "test")
 """Splits a ``generator`` reference may name (those of missions.generator.scenario_seeds)."""
 
 _TOP_KEYS = ("name", "flight", "geofence", "scenario")
-_INLINE_KEYS = ("home", "area", "start", "datum", "targets", "obstacles", "conditions", "current", "seed", "name")
+_INLINE_KEYS = ("home", "area", "start", "datum", "targets", "obstacles", "conditions", "current", "endurance_s",
+                "seed", "name")
+_CURRENT_KEYS = ("north_mps", "east_mps", "forecast_north_mps", "forecast_east_mps")
+_FLAT_NAMES = {"current_forecast_north_mps": "forecast_current_north_mps",
+               "current_forecast_east_mps": "forecast_current_east_mps"}
+"""Scenario attributes whose flat name is not section_key (the file's current.forecast_north_mps)."""
 _INLINE_REQUIRED = ("home", "area", "datum", "targets")
 _AREA_KEYS = tuple(f.name for f in dataclasses.fields(SearchArea))
 _ENUMS: dict[str, type[enum.Enum]] = {"SeaState": SeaState, "Weather": Weather, "TimeOfDay": TimeOfDay}
@@ -391,7 +401,7 @@ def _construct(cls: type, path: str, paths: Mapping[str, str] | None = None,
     # Validated with the numbers as written (messages say "got 500", not "got 500.0"); stored as floats so
     # that arrays built from a scenario are float arrays, whatever the YAML spelling (50 or 50.0).
     floats = {f.name: float(kwargs[f.name]) for f in dataclasses.fields(cls)
-              if f.type in ("float", float) and isinstance(kwargs.get(f.name), int)}
+              if f.type in ("float", float, "float | None") and isinstance(kwargs.get(f.name), int)}
     return dataclasses.replace(built, **floats) if floats else built
 
 
@@ -465,12 +475,16 @@ def _inline(spec: dict[str, Any], path: str) -> Scenario:
     flat: dict[str, float] = {}
     for section, keys, required in (("datum", ("north_m", "east_m", "sigma_m"), ("north_m", "east_m")),
                                     ("start", ("north_m", "east_m"), ("north_m", "east_m")),
-                                    ("current", ("north_mps", "east_mps"), ())):
+                                    ("current", _CURRENT_KEYS, ())):
         if section in spec:
             values = _numbers(spec[section], f"{path}.{section}", keys, required)
-            flat.update({f"{section}_{key}": number for key, number in values.items()})
-    paths = {f"{section}_{key}": f"{path}.{section}.{key}"
-             for section, key in (("datum", "sigma_m"), ("current", "north_mps"), ("current", "east_mps"))}
+            flat.update({_FLAT_NAMES.get(f"{section}_{key}", f"{section}_{key}"): number
+                         for key, number in values.items()})
+    if "endurance_s" in spec:
+        flat["endurance_s"] = _number(spec["endurance_s"], f"{path}.endurance_s")
+    paths = {_FLAT_NAMES.get(f"{section}_{key}", f"{section}_{key}"): f"{path}.{section}.{key}"
+             for section, key in (("datum", "sigma_m"), *(("current", key) for key in _CURRENT_KEYS))}
+    paths["endurance_s"] = f"{path}.endurance_s"
     paths["start position"] = f"{path}.start"  # Scenario's object-level message about the start
     start = (flat.get("start_north_m", 0.0), flat.get("start_east_m", 0.0))
     details = {f"{path}.start": f"start ({start[0]:g}, {start[1]:g}), area {_span(area)}"}
@@ -504,7 +518,8 @@ def _conditions(value: Any, path: str) -> Conditions:
 
 
 def _generated(value: Any, path: str) -> Scenario:
-    spec = _mapping(value, path, ("split", "index", "seed"))
+    spec = _mapping(value, path, ("split", "index", "seed", "task"))
+    task = _choice(spec.get("task", "SarSearch-v0"), f"{path}.task", ("sarsearch-v0", "sarsearch-v1"))
     seed: int | None = None
     if "seed" in spec:
         if "split" in spec or "index" in spec:
@@ -524,6 +539,10 @@ def _generated(value: Any, path: str) -> Scenario:
     try:
         if seed is None:
             seed = scenario_seeds(split, index + 1)[index]
+        if task == "sarsearch-v1":
+            from missions.generator import TASK_V1
+
+            return generate_scenario(seed, TASK_V1)
         return generate_scenario(seed)
     except ValueError as error:
         raise _Invalid(path, f"the generator refused it: {error}") from None
@@ -614,6 +633,12 @@ def _scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         "current": {"north_mps": _plain(s.current_north_mps), "east_mps": _plain(s.current_east_mps)},
         "seed": int(s.seed),
     }
+    for key, value in (("forecast_north_mps", s.forecast_current_north_mps),
+                       ("forecast_east_mps", s.forecast_current_east_mps)):
+        if value is not None:
+            data["current"][key] = _plain(value)
+    if s.endurance_s is not None:
+        data["endurance_s"] = _plain(s.endurance_s)
     if s.name:
         data["name"] = str(s.name)
     return data

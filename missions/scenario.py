@@ -151,6 +151,14 @@ class Scenario:
     current_north_mps: float = 0.0
     """Sea current (m/s); objects drift with the current plus a leeway share of the wind."""
     current_east_mps: float = 0.0
+    forecast_current_north_mps: float | None = None
+    """The current the crew's drift forecast assumes (m/s); None = the true current (an exact forecast, as in
+    SarSearch-v0). The datum and the search belief drift with the forecast, the objects with the truth."""
+    forecast_current_east_mps: float | None = None
+    """East part of the forecast current (m/s); None = the true current."""
+    endurance_s: float | None = None
+    """Flight time the drone's battery allows for this sortie, counted from the start of the search (s); the
+    search must leave enough of it to fly home. None = unlimited (SarSearch-v0)."""
     seed: int = 0
     """Seed of everything random while this scenario is flown (detections)."""
     name: str = ""
@@ -163,6 +171,11 @@ class Scenario:
         check_number("Scenario", "datum_sigma_m", self.datum_sigma_m, 0.0, 1e5)
         check_number("Scenario", "current_north_mps", self.current_north_mps, -5.0, 5.0)
         check_number("Scenario", "current_east_mps", self.current_east_mps, -5.0, 5.0)
+        for name in ("forecast_current_north_mps", "forecast_current_east_mps"):
+            if getattr(self, name) is not None:
+                check_number("Scenario", name, getattr(self, name), -5.0, 5.0)
+        if self.endurance_s is not None:
+            check_number("Scenario", "endurance_s", self.endurance_s, 10.0, 1e6)
         if not self.area.contains(self.start_north_m, self.start_east_m):
             raise ValueError("Scenario: the start position must lie inside the search area")
 

@@ -133,15 +133,20 @@ class ScenarioBatch:
     """(N, T, 2) float64 m/s: current + leeway * wind, per target (0 for padding)."""
     seeds: np.ndarray
     """(N,) int64: Scenario.seed, the seed of the randomness while the scenario is flown."""
+    forecast_drift: np.ndarray
+    """(N, 2) float64 m/s: the drift the crew forecasts for the reported object: the forecast current (the true one
+    unless the scenario sets a forecast) plus its category's leeway times the wind."""
+    endurance_s: np.ndarray
+    """(N,) float64: Scenario.endurance_s (inf when unlimited)."""
 
     def datum_at(self, time_s: np.ndarray) -> np.ndarray:
         """(N, 2) the datum drifted to ``time_s`` (N,) seconds into the search.
 
         A SAR planner moves the datum with the forecast total water current plus the leeway of the reported
-        object (IAMSAR's datum computation); here the forecast is the scenario's own current and wind, and the
-        reported object is the primary target's category. Nothing else about the victim is used."""
-        drift = self.drift_velocity[np.arange(len(self.datum)), self.primary_index]
-        return self.datum + drift * np.reshape(time_s, (-1, 1))
+        object (IAMSAR's datum computation); the reported object is the primary target's category, the forecast
+        the scenario's (its true current and wind unless it sets a forecast current). Nothing else about the
+        victim is used."""
+        return self.datum + self.forecast_drift * np.reshape(time_s, (-1, 1))
     target_size_m: np.ndarray = field(init=False)
     """(N, T) float64, derived: OBJECT_SIZE_M of each target (0 for padding)."""
     detection_factor: np.ndarray = field(init=False)
@@ -203,6 +208,12 @@ class ScenarioBatch:
         fence = area.copy() if fences is None else np.array(
             [rect(f if f is not None else s.area) for s, f in zip(scenarios, fences)], dtype=np.float64)
         wind = np.array([s.conditions.wind for s in scenarios], dtype=np.float64)
+        forecast_current = np.array([(s.current_north_mps if s.forecast_current_north_mps is None
+                                      else s.forecast_current_north_mps,
+                                      s.current_east_mps if s.forecast_current_east_mps is None
+                                      else s.forecast_current_east_mps) for s in scenarios], dtype=np.float64)
+        reported = category[np.arange(n), primary]
+        has_targets = valid[np.arange(n), primary][:, None]
         return cls(
             area=area, fence=fence,
             start=np.array([(s.start_north_m, s.start_east_m) for s in scenarios], dtype=np.float64),
@@ -218,6 +229,8 @@ class ScenarioBatch:
             drift_velocity=target_drift_velocity(category, wind[:, None], wind_dir[:, None], current[:, None, :])
             * valid[:, :, None],  # padding stays put
             seeds=np.array([s.seed for s in scenarios], dtype=np.int64),
+            forecast_drift=target_drift_velocity(reported, wind, wind_dir, forecast_current) * has_targets,
+            endurance_s=np.array([np.inf if s.endurance_s is None else s.endurance_s for s in scenarios]),
         )
 
     @classmethod

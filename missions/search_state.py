@@ -43,6 +43,16 @@ def keyed_uniforms(seeds: np.ndarray, steps: np.ndarray, count: int) -> np.ndarr
     return (bits >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
+def checked_goals(goals, mask: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Goal indices broadcast to (n,) and the mask of the searches they are for (all by default); a ValueError
+    when a masked index is not one of GOAL_NAMES'."""
+    goals = np.broadcast_to(np.asarray(goals, dtype=np.int64), (n,))
+    mask = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if np.any((goals[mask] < 0) | (goals[mask] >= len(goal_logic.GOAL_NAMES))):
+        raise ValueError(f"goal indices must be in [0, {len(goal_logic.GOAL_NAMES) - 1}], got {goals[mask]}")
+    return goals, mask
+
+
 @dataclass
 class StepOutcome:
     """What one :meth:`SearchState.advance` found, per search (N,) arrays; views valid until the next step."""
@@ -105,10 +115,7 @@ class SearchState:
 
     def set_goals(self, goals: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """Give searches a meta-controller goal (index into GOAL_NAMES) and ground it now; returns the mask."""
-        goals = np.broadcast_to(np.asarray(goals, dtype=np.int64), (self.n,))
-        mask = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-        if np.any((goals[mask] < 0) | (goals[mask] >= len(goal_logic.GOAL_NAMES))):
-            raise ValueError(f"goal indices must be in [0, {len(goal_logic.GOAL_NAMES) - 1}], got {goals[mask]}")
+        goals, mask = checked_goals(goals, mask, self.n)
         self.goal[mask] = goals[mask]
         self.ground(mask)
         return mask
@@ -167,3 +174,8 @@ class SearchState:
     @property
     def coverage_ratio(self) -> np.ndarray:
         return self.covered_cells / self.coverage[0].size
+
+    @property
+    def searched_cells(self) -> np.ndarray:
+        """(N,) the coverage grid's sum: covered cells (what the low level's coverage bonus counts)."""
+        return self.covered_cells

@@ -1,43 +1,54 @@
-"""Scripted search baselines over the environment's action space (vectorised over a batch).
+"""SarSearch-v1's scripted searchers, vectorised over a batch: the strongest scripted methods built on what a crew
+knows (area, charted danger zones, datum and its forecast drift, conditions, own position, own sightings, the
+belief of ``missions.belief``), never the hidden victim. SarSearch-v0's are in ``policies.baselines_v0``.
 
-They use only what a real crew knows: the search area, the datum and its uncertainty, their own position
-and their own detections (the last detection of the victim), never the hidden victim location.
+Every searcher shares the same rules around its search pattern (:class:`ScriptedSearch`):
 
-* ``random``: uniform actions.
-* ``expanding_square``: IAMSAR expanding square search from the datum: legs of S, S, 2S, 2S, 3S, 3S, ...
-  turning right each time, with track spacing S = 1.8 x the footprint half-width (10 % overlap).
-* ``parallel_track``: IAMSAR parallel track ("lawnmower") search of the box of +-2.5 sigma around the datum,
-  east-west tracks S apart, starting from the corner nearest to the drone.
+* **confirm, then reach**: a candidate identified as the victim is flown to; otherwise the nearest unresolved
+  candidate at least ``investigate_plausibility`` plausible is flown to, and over it the drone hovers with the
+  camera at ``close_look_zoom`` (the search logic takes the camera down for the close look) until it resolves;
+* **bingo**: once the endurance left is no more than the way home at full speed plus ``reserve_s``, the drone flies
+  home and hovers there (which ends the sortie with its reserve);
+* every point is kept 20 m inside the geofence and routed around the danger zones (``missions.goals``);
+* the pattern itself flies at full speed, sensor on, camera at its widest (the widest sweep).
 
-Both patterns drift with the datum (the forecast current plus the reported object's leeway, as IAMSAR plans
-a search of a drifting object) and fly at full speed with the sensor on and the camera at its widest; once the victim
-has been detected fly straight to the last detection. Like a real crew they know the charted hazards and the
-search-area boundary: waypoints are kept 20 m inside the geofence, and a leg that would enter a danger zone
-(plus a 15 m margin) is flown around it along its edge.
+The patterns:
+
+* ``expanding_square``: IAMSAR's expanding square from the drifting datum, legs S, S, 2S, 2S, ... turning right,
+  bounded: once its half side passes ``bound_sigmas`` datum sigmas it starts again from the datum, offset by S/2
+  (the second pass flies the lanes between the first's); repeated until the sortie ends;
+* ``parallel_track``: IAMSAR's parallel track over the box of +- ``bound_sigmas`` datum sigmas round the drifting
+  datum, tracks S apart from the corner nearest the drone, repeated with the tracks offset by S/2;
+* ``greedy_bayes``: the cell with the most belief per travel time, belief / (distance / speed + ``travel_time_s``),
+  flown to and kept until reached or searched down to half its belief, then the next.
+
+Track spacing S = W / ``coverage_factor`` with W the effective sweep width of the camera for the reported object
+in the scenario's conditions (``missions.sweep_width``: IAMSAR's coverage factor C = W / S). The settings are
+tuned on the val split (``benchmarks/tune_baselines.py``; the defaults are its choice, docs/results/README.md).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from missions import goals as goal_logic
 from missions import search
+from missions.sweep_width import sweep_width_m
+from missions.validation import check_fields
 
 if TYPE_CHECKING:
-    from policies.env_core import SarSearchBatch
+    from policies.ambiguous_env import AmbiguousSearchBatch
 
-TRACK_SPACING_FACTOR = 1.8
-PARALLEL_TRACK_SIGMAS = 2.5
-MAX_WAYPOINTS = 128
-ZOOM = 0.0
-FENCE_MARGIN_M = 20.0
-HAZARD_MARGIN_M = 15.0
+MAX_WAYPOINTS = 256
 
 
-def fly_straight(position: np.ndarray, goal: np.ndarray, flight, turn: Callable | None = None) -> np.ndarray:
+def fly_straight(position: np.ndarray, goal: np.ndarray, flight, zoom: float | np.ndarray,
+                 turn: Callable | None = None) -> np.ndarray:
     """(N, 4) actions flying from ``position`` straight at ``goal`` (both (N, 2) metres) at full speed, slowing over
     the last step so as to stop on the point instead of overshooting it, with the sensor on and the camera at
-    ``ZOOM``. ``turn(position, direction, step_m)`` may bend the unit direction (hazard avoidance)."""
+    ``zoom``. ``turn(position, direction, step_m)`` may bend the unit direction (hazard avoidance)."""
     offset = goal - position
     distance = np.hypot(*offset.T)
     step_m = flight.max_speed_mps * flight.step_period_s
@@ -48,115 +59,209 @@ def fly_straight(position: np.ndarray, goal: np.ndarray, flight, turn: Callable 
     actions = np.zeros((len(position), 4))
     actions[:, 0:2] = direction * speed_fraction[:, None]
     actions[:, 2] = 1.0
-    actions[:, 3] = ZOOM
+    actions[:, 3] = zoom
     return actions
 
 
+@dataclass(frozen=True)
+class ScriptedSettings:
+    """The knobs of the scripted searchers (tuned on the val split)."""
+
+    coverage_factor: float = 1.0
+    """IAMSAR's coverage factor C = W / S: the track spacing is the sweep width over it. Allowed [0.25, 4]."""
+    bound_sigmas: float = 2.5
+    """Patterns: half side of the expanding square / the parallel-track box, in datum sigmas. Allowed [0.5, 10]."""
+    investigate_plausibility: float = 0.0
+    """Candidates at least this plausible (``BeliefSearchState.plausibility``) are looked at. Allowed [0, 1]."""
+    close_look_zoom: float = 0.5
+    """Zoom while hovering over a candidate. Allowed [0, 1]."""
+    reserve_s: float = 60.0
+    """Bingo: head home when the endurance left is the way home plus this (s). Allowed [0, 3600]."""
+    travel_time_s: float = 30.0
+    """Greedy Bayes: tau in belief / (travel time + tau) (s). Allowed [1, 3600]."""
+
+    def __post_init__(self) -> None:
+        check_fields(self, (("coverage_factor", 0.25, 4.0), ("bound_sigmas", 0.5, 10.0),
+                            ("investigate_plausibility", 0.0, 1.0), ("close_look_zoom", 0.0, 1.0),
+                            ("reserve_s", 0.0, 3600.0), ("travel_time_s", 1.0, 3600.0)))
+
+
 class ScriptedSearch:
-    """Base: a per-environment waypoint list, followed at full speed; the victim's detection overrides it."""
+    """The shared rules (module docstring) around a search point that each pattern supplies."""
 
-    def __init__(self, core: "SarSearchBatch"):
-        self.core = core
-        self.waypoints = np.zeros((core.n, MAX_WAYPOINTS, 2))
-        self.count = np.zeros(core.n, dtype=np.int64)
-        self.next = np.zeros(core.n, dtype=np.int64)
-        self.spacing_m = TRACK_SPACING_FACTOR * float(search.footprint_half_width_m(core.flight.altitude_m, ZOOM))
-        self.planned_episode = np.full(core.n, -1, dtype=np.int64)
+    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+        self.core, self.settings = core, settings
+        self.going_home = np.zeros(core.n, dtype=bool)
+        self.started = np.full(core.n, -1, dtype=np.int64)  # the episode (by seed) each slot was planned for
 
-    def plan(self, index: int) -> np.ndarray:
-        """The waypoints of environment ``index`` for its current episode, (W, 2) north/east metres."""
+    def search_point(self, fresh: np.ndarray) -> np.ndarray:
+        """(N, 2) where the pattern flies now; ``fresh`` (N,) marks slots whose episode just started."""
         raise NotImplementedError
 
+    def spacing_m(self, rows: np.ndarray) -> np.ndarray:
+        """Track spacing S (m) of these slots: the sweep width for the reported object over the coverage factor."""
+        core, flight = self.core, self.core.flight
+        reported = core.scen.primary_index[rows]
+        width = sweep_width_m(flight.altitude_m, 0.0, flight.max_speed_mps, flight.step_period_s,
+                              core.scen.target_size_m[rows, reported], core.scen.detection_factor[rows, reported])
+        return width / self.settings.coverage_factor
+
     def act(self) -> np.ndarray:
+        core, settings, flight = self.core, self.settings, self.core.flight
+        fresh = (core.steps == 0) | (self.started != core.episode_seed.astype(np.int64))
+        self.started[fresh] = core.episode_seed[fresh].astype(np.int64)
+        self.going_home[fresh] = False
+        point = self.search_point(fresh)
+        estimates, kind = core.candidate_estimates(), core.candidate_kind()
+        worth = (kind == 2) | ((kind == 1) & (core.plausibility >= settings.investigate_plausibility))
+        candidate, has_candidate = goal_logic.candidate_point(core.position, estimates, np.where(worth, kind, 0))
+        point = np.where(has_candidate[:, None], candidate, point)
+        home = core.scen.start
+        left_s = core.energy_left * core.scen.endurance_s
+        self.going_home |= left_s - np.hypot(*(core.position - home).T) / flight.max_speed_mps <= settings.reserve_s
+        point = np.where(self.going_home[:, None], home, point)
+        area = core.scen.area
+        point[:, 0] = np.clip(point[:, 0], area[:, 0] + goal_logic.FENCE_MARGIN_M, area[:, 1] - goal_logic.FENCE_MARGIN_M)
+        point[:, 1] = np.clip(point[:, 1], area[:, 2] + goal_logic.FENCE_MARGIN_M, area[:, 3] - goal_logic.FENCE_MARGIN_M)
+        routed = goal_logic.route_around_hazards(core.position, point, core.scen.obstacles, core.scen.obstacle_valid,
+                                                 area)
+        looking = has_candidate & ~self.going_home & (np.hypot(*(candidate - core.position).T) <= flight.reach_radius_m)
+        zoom = np.where(looking, settings.close_look_zoom, 0.0)
+        actions = fly_straight(core.position, routed, flight, zoom)
+        # over a candidate or home: hold still (a close look needs a steady camera; home is where it lands)
+        hold = looking | (self.going_home & (np.hypot(*(core.position - home).T) <= flight.reach_radius_m))
+        actions[hold, 0:2] = np.clip((routed - core.position)[hold] / (flight.max_speed_mps * 4.0), -0.2, 0.2)
+        return actions
+
+
+class WaypointPattern(ScriptedSearch):
+    """A pattern of waypoints relative to the drifting datum, followed in order and repeated."""
+
+    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+        super().__init__(core, settings)
+        self.waypoints = np.zeros((core.n, MAX_WAYPOINTS, 2))
+        self.count = np.ones(core.n, dtype=np.int64)
+        self.next = np.zeros(core.n, dtype=np.int64)
+
+    def plan(self, rows: np.ndarray) -> list[np.ndarray]:
+        """Each slot's waypoints (W, 2), metres from the datum, for these rows."""
+        raise NotImplementedError
+
+    def search_point(self, fresh: np.ndarray) -> np.ndarray:
         core = self.core
-        # (re)plan environments that started a new episode since the last call
-        fresh = core.steps == 0
-        for i in np.flatnonzero(fresh | (self.count == 0)):
-            points = self.plan(int(i))[:MAX_WAYPOINTS]
-            self.waypoints[i, : len(points)] = points
-            self.count[i], self.next[i] = len(points), 0
-        position = core.position
-        index = np.arange(core.n)
-        drift = core.scen.datum_at(core.time_s) - core.scen.datum  # the pattern moves with the drifting datum
-        goal = self.waypoints[index, np.minimum(self.next, self.count - 1)] + drift
-        arrived = np.hypot(*(goal - position).T) < 0.5 * core.flight.max_speed_mps * core.flight.step_period_s + 1.0
-        self.next += arrived & (self.next < self.count - 1)
-        goal = self.waypoints[index, self.next] + drift
-        goal = np.where(core.has_detection[:, None], core.last_detection, goal)
-        fence = core.scen.fence
-        goal[:, 0] = np.clip(goal[:, 0], fence[:, 0] + FENCE_MARGIN_M, fence[:, 1] - FENCE_MARGIN_M)
-        goal[:, 1] = np.clip(goal[:, 1], fence[:, 2] + FENCE_MARGIN_M, fence[:, 3] - FENCE_MARGIN_M)
-        return fly_straight(position, goal, core.flight, turn=self._avoid_hazards)
+        rows = np.flatnonzero(fresh)
+        if len(rows):
+            for row, points in zip(rows, self.plan(rows)):
+                points = points[:MAX_WAYPOINTS]
+                self.waypoints[row, :len(points)] = points
+                self.count[row], self.next[row] = max(len(points), 1), 0
+        datum, index = core.scen.datum_at(core.time_s), np.arange(core.n)
+        goal = self.waypoints[index, self.next] + datum
+        arrived = np.hypot(*(goal - core.position).T) < 0.5 * core.flight.max_speed_mps * core.flight.step_period_s + 1.0
+        self.next = np.where(arrived, (self.next + 1) % self.count, self.next)  # the pattern repeats
+        return self.waypoints[index, self.next] + datum
 
 
-    def _avoid_hazards(self, position: np.ndarray, direction: np.ndarray, step_m: float) -> np.ndarray:
-        """Turn onto the tangent of the nearest danger zone that the next step would enter (inflated by the
-        margin), on the side closer to the wanted direction."""
-        obstacles, valid = self.core.scen.obstacles, self.core.scen.obstacle_valid
-        ahead = position + direction * step_m
-        dn = ahead[:, None, 0] - obstacles[:, :, 0]
-        de = ahead[:, None, 1] - obstacles[:, :, 1]
-        clearance = np.hypot(dn, de) - (obstacles[:, :, 2] + HAZARD_MARGIN_M)
-        clearance = np.where(valid, clearance, np.inf)
-        nearest = clearance.argmin(axis=1)
-        rows = np.arange(len(position))
-        blocked = clearance[rows, nearest] < 0.0
-        if not blocked.any():
-            return direction
-        centre = obstacles[rows, nearest, :2]
-        radial = position - centre
-        radial /= np.maximum(np.hypot(*radial.T), 1e-9)[:, None]
-        tangent = np.stack([-radial[:, 1], radial[:, 0]], axis=1)  # one way round
-        tangent *= np.where(np.einsum("ij,ij->i", tangent, direction) >= 0.0, 1.0, -1.0)[:, None]
-        return np.where(blocked[:, None], tangent, direction)
+class ExpandingSquare(WaypointPattern):
+    def plan(self, rows: np.ndarray) -> list[np.ndarray]:
+        spacing = self.spacing_m(rows)
+        bound = self.settings.bound_sigmas * self.core.scen.datum_sigma[rows]
+        plans = []
+        for s, limit in zip(spacing, bound):
+            passes = []
+            for start in (np.zeros(2), np.full(2, s / 2.0)):  # the second pass flies between the first's lanes
+                points, leg, heading = [start], 1, 0
+                headings = np.array([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)])  # N, E, S, W: turning right
+                while np.abs(points[-1] - start).max() <= limit and len(points) < MAX_WAYPOINTS // 2:
+                    points.append(points[-1] + headings[heading % 4] * leg * s)
+                    if heading % 2 == 1:
+                        leg += 1
+                    heading += 1
+                passes.append(np.array(points))
+            plans.append(np.concatenate(passes))
+        return plans
 
 
-class ExpandingSquare(ScriptedSearch):
-    def plan(self, index: int) -> np.ndarray:
-        datum = self.core.scen.datum[index]
-        points = [datum]
-        headings = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))  # N, E, S, W: turning right
-        leg = 1
-        for turn in range(MAX_WAYPOINTS - 1):
-            step = np.array(headings[turn % 4]) * leg * self.spacing_m
-            points.append(points[-1] + step)
-            if turn % 2 == 1:
-                leg += 1
-        return np.array(points)
-
-
-class ParallelTrack(ScriptedSearch):
-    def plan(self, index: int) -> np.ndarray:
+class ParallelTrack(WaypointPattern):
+    def plan(self, rows: np.ndarray) -> list[np.ndarray]:
         core = self.core
-        area, datum = core.scen.area[index], core.scen.datum[index]
-        half_box = PARALLEL_TRACK_SIGMAS * core.scen.datum_sigma[index]
-        south, north = max(area[0], datum[0] - half_box), min(area[1], datum[0] + half_box)
-        west, east = max(area[2], datum[1] - half_box), min(area[3], datum[1] + half_box)
-        tracks = np.arange(south + self.spacing_m / 2, north, self.spacing_m)
-        if core.position[index, 0] > (south + north) / 2:  # start from the nearer end
-            tracks = tracks[::-1]
-        start_west = abs(core.position[index, 1] - west) <= abs(core.position[index, 1] - east)
-        points = []
-        for k, track in enumerate(tracks):
-            ends = (west, east) if (k % 2 == 0) == start_west else (east, west)
-            points += [(track, ends[0]), (track, ends[1])]
-        return np.array(points) if points else datum[None, :]
+        spacing = self.spacing_m(rows)
+        plans = []
+        for row, s in zip(rows, spacing):
+            area, datum = core.scen.area[row], core.scen.datum[row]
+            half = self.settings.bound_sigmas * core.scen.datum_sigma[row]
+            margin = goal_logic.FENCE_MARGIN_M
+            south, north = max(area[0] + margin, datum[0] - half), min(area[1] - margin, datum[0] + half)
+            west, east = max(area[2] + margin, datum[1] - half), min(area[3] - margin, datum[1] + half)
+            start = core.position[row] - datum
+            from_north = start[0] > (south + north) / 2.0 - datum[0]
+            points = []
+            for shift in (0.5, 1.0):  # the second pass flies between the first's tracks
+                tracks = np.arange(south + shift * s, north, s)
+                if from_north:
+                    tracks = tracks[::-1]
+                west_first = abs(start[1] + datum[1] - west) <= abs(start[1] + datum[1] - east)
+                for k, track in enumerate(tracks):
+                    ends = (west, east) if (k % 2 == 0) == west_first else (east, west)
+                    points += [(track, ends[0]), (track, ends[1])]
+            plans.append(np.array(points) - datum if points else np.zeros((1, 2)))
+        return plans
+
+
+class GreedyBayes(ScriptedSearch):
+    """The cell with the most belief per travel time, kept until reached or half searched (module docstring)."""
+
+    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+        super().__init__(core, settings)
+        self.cell = np.full(core.n, -1, dtype=np.int64)
+        self.cell_belief = np.zeros(core.n)
+
+    def search_point(self, fresh: np.ndarray) -> np.ndarray:
+        core, flight = self.core, self.core.flight
+        n, grid = core.n, search.GRID_SIZE
+        north, east = goal_logic.cell_centres(core.scen.area, grid)
+        north, east = north + core.belief_offset[:, 0:1], east + core.belief_offset[:, 1:2]
+        flat = core.belief.reshape(n, -1)
+        index = np.arange(n)
+        current = np.stack([north[index, self.cell // grid], east[index, self.cell % grid]], axis=1)
+        reached = np.hypot(*(current - core.position).T) <= flight.reach_radius_m
+        searched = flat[index, self.cell] < 0.5 * self.cell_belief
+        choose = fresh | (self.cell < 0) | reached | searched
+        if choose.any():
+            rows = np.flatnonzero(choose)
+            travel_s = np.hypot(north[rows, :, None] - core.position[rows, 0, None, None],
+                                east[rows, None, :] - core.position[rows, 1, None, None]) / flight.max_speed_mps
+            score = np.log(np.maximum(core.belief[rows], 1e-300)) - np.log(travel_s + self.settings.travel_time_s)
+            best = score.reshape(len(rows), -1).argmax(axis=1)
+            self.cell[rows], self.cell_belief[rows] = best, flat[rows, best]
+            current[rows] = np.stack([north[rows, best // grid], east[rows, best % grid]], axis=1)
+        return current
 
 
 class RandomSearch:
     """Uniform random actions from a seeded generator."""
 
-    def __init__(self, core: "SarSearchBatch", seed: int = 0):
+    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings | None = None, seed: int = 0):
         self.core = core
         self.rng = np.random.default_rng(seed)
 
     def act(self) -> np.ndarray:
-        low = np.array([-1.0, -1.0, 0.0, 0.0])
-        return self.rng.uniform(low, 1.0, size=(self.core.n, 4))
+        return self.rng.uniform(np.array([-1.0, -1.0, 0.0, 0.0]), 1.0, size=(self.core.n, 4))
 
 
-BASELINES: dict[str, Callable[["SarSearchBatch"], object]] = {
+BASELINES: dict[str, Callable[..., object]] = {
     "random": RandomSearch,
     "expanding_square": ExpandingSquare,
     "parallel_track": ParallelTrack,
+    "greedy_bayes": GreedyBayes,
 }
+"""SarSearch-v1's scripted searchers by name; each takes (core, settings)."""
+
+
+def with_settings(settings: ScriptedSettings, **changes) -> ScriptedSettings:
+    """A copy of ``settings`` with ``changes`` (validated)."""
+    return replace(settings, **changes)
+
+
+TUNED: dict[str, ScriptedSettings] = {}
+"""Each searcher's settings as chosen on the val split (``benchmarks/tune_baselines.py``); absent: the defaults."""

@@ -9,7 +9,6 @@ from typing import BinaryIO
 import numpy as np
 import torch
 
-from autonomy.observation import META_OBS_DIM, OBS_DIM
 from autonomy.policy import one_line
 from missions.goals import GOAL_NAMES
 from policies.config import TrainConfig
@@ -108,21 +107,22 @@ class CheckpointPolicy:
     @classmethod
     def untrained(cls, config: TrainConfig) -> "CheckpointPolicy":
         """The networks a run with ``config`` starts from and an identity normaliser (benchmarks, tests)."""
-        low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed,
+        layout = config.layout
+        low = SAC(layout.dim, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed,
                   input_mask=config.low_level_input_mask)
         meta = None
         if config.algo == "hrl-sac":
-            meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), config, seed=config.seed + 1)
-        return cls(config, RunningMeanStd((OBS_DIM,)), low, meta, 0, Path("untrained"))
+            meta = DiscreteSAC(layout.meta_dim, len(GOAL_NAMES), config, seed=config.seed + 1)
+        return cls(config, RunningMeanStd((layout.dim,)), low, meta, 0, Path("untrained"))
 
     @property
     def hierarchical(self) -> bool:
         return self.meta is not None
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """(N, 276) raw observations -> (N, 4) deterministic actions in the environment's ranges."""
+        """(N, obs_dim) raw observations -> (N, 4) deterministic actions in the environment's ranges."""
         return self.low.act(self.normalizer.normalize(obs), deterministic=True)
 
     def choose_goals(self, meta_obs: np.ndarray) -> np.ndarray:
-        """(N, 272) raw meta observations -> (N,) goal indices (the most probable goal)."""
+        """(N, meta_dim) raw meta observations -> (N,) goal indices (the most probable goal)."""
         return self.meta.act(self.normalizer.normalize(meta_obs), deterministic=True)

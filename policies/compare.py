@@ -178,8 +178,9 @@ def read_progress(path: Path) -> dict[str, np.ndarray] | None:
     return {name: values[order] for name, values in data.items()}
 
 
-def load_runs(paths: list, split: str) -> list[Run]:
-    """Config, existing evaluation and training log of each folder (no evaluation is run here)."""
+def load_runs(paths: list, split: str, scenarios: str | None = None) -> list[Run]:
+    """Config, existing evaluation (``eval_<split>[_<scenarios>].json``) and training log of each folder (no
+    evaluation is run here)."""
     if not paths:
         raise CompareError("no runs given (pass one or more run folders written by hrlsac train)")
     runs, seen = [], set()
@@ -197,7 +198,7 @@ def load_runs(paths: list, split: str) -> list[Run]:
             raise CompareError(f"{path / 'config.json'}: not a training config (needs algo, seed and flight)")
         config.setdefault("preset", "default")
         run = Run(path, config, progress=read_progress(path / "progress.csv"))
-        eval_path = path / f"eval_{split}.json"
+        eval_path = path / f"eval_{split}{f'_{scenarios}' if scenarios else ''}.json"
         if eval_path.exists():
             run.metrics = _check_metrics(_read_json(eval_path, "evaluation"), eval_path, run, split)
         runs.append(run)
@@ -260,14 +261,17 @@ def train_command(run: Run) -> str:
     cfg = run.config
     args = ["hrlsac", "train", "--algo", cfg["algo"], "--preset", cfg["preset"],
             "--steps", str(cfg.get("total_steps")), "--seed", str(cfg["seed"])]
+    task = cfg.get("task", "SarSearch-v0")  # runs from before the field trained on v0
+    if task != TrainConfig.task:
+        args += ["--set", f"task={task}"]
     try:
         base = json.loads(json.dumps(TrainConfig.from_preset(cfg["preset"], algo=cfg["algo"], seed=cfg["seed"],
-                                                        total_steps=cfg.get("total_steps")).to_dict()))
+                                                        total_steps=cfg.get("total_steps"), task=task).to_dict()))
     except (TypeError, ValueError):
         base = {}
     notes = []
     for key, value in cfg.items():
-        if key in ("algo", "preset", "seed", "total_steps") or base.get(key) == value:
+        if key in ("algo", "preset", "seed", "total_steps", "task") or base.get(key) == value:
             continue
         if key == "num_envs":
             args += ["--num-envs", str(value)]
@@ -299,7 +303,8 @@ def label_of(key: tuple[str, str]) -> str:
 
 
 def compare(runs: list, out, split: str = "test", episodes: int | None = None, evaluate: bool = False,
-            command: str | None = None, progress: TextIO | bool | None = True) -> dict:
+            command: str | None = None, progress: TextIO | bool | None = True, streams: int = 5,
+            generator=None, scenarios: str | None = None) -> dict:
     """Compare run folders and the scripted baselines on ``split``; writes the report and figures into ``out``.
 
     Missing (or differently sized) evaluations are computed with ``evaluate=True`` and saved as
@@ -307,12 +312,20 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     the runs' evaluation files (100 when there are none). ``progress``: True prints one line per run and baseline
     to stderr, a stream prints there, None/False is silent. ``command`` is the command line recorded in the report
     (default: reconstructed). Returns the summary written to ``out/summary.json`` plus the paths of the files.
+    SarSearch-v1 runs also get the rows of ``policies.compare_groups`` (scripted searchers over ``streams``
+    detection streams, constant goals, IQM, P(found by t)); ``generator`` (a GeneratorConfig) with ``scenarios``
+    (the name ``hrlsac evaluate --generator`` gave the eval files) compares on that distribution instead.
     """
-    from policies.baselines import BASELINES
+    from policies import compare_groups
+    from policies.baselines_v0 import BASELINES_V0
 
     progress = sys.stderr if progress is True else (progress or None)
-    loaded = load_runs(list(runs), split)
+    loaded = load_runs(list(runs), split, scenarios)
     flight = common_flight(loaded)
+    task = compare_groups.check_task(loaded)
+    if (generator is not None or scenarios) and (evaluate or task != "SarSearch-v1"):
+        raise CompareError("other scenarios than the split's are compared from existing SarSearch-v1 evaluations "
+                           "(hrlsac evaluate --generator FILE), without --evaluate")
     episodes = resolve_episodes(loaded, episodes, split, evaluate)
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -329,9 +342,13 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
         started = time.perf_counter()
         run.metrics = _evaluate(run, split, episodes)
         _say(progress, f"success {run.metrics['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
-    baselines = {}
-    for i, name in enumerate(BASELINES, 1):
-        _say(progress, f"[baseline {i}/{len(BASELINES)}] {name} on {split} ({episodes} episodes) ... ", end="")
+    baselines, scripted_rows = {}, None
+    environment = {"generator": generator} if generator is not None else {}
+    if task == "SarSearch-v1":
+        scripted_rows, baselines = compare_groups.scripted_rows(task, split, episodes, flight, streams, environment,
+                                                                progress)
+    for i, name in enumerate(BASELINES_V0 if task == "SarSearch-v0" else (), 1):
+        _say(progress, f"[baseline {i}/{len(BASELINES_V0)}] {name} on {split} ({episodes} episodes) ... ", end="")
         started = time.perf_counter()
         baselines[name] = _run_baseline(name, split, episodes, flight)
         _say(progress, f"success {baselines[name]['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
@@ -352,13 +369,30 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
                        **pooled_stats([metrics])} for name, metrics in baselines.items()],
     }
     summary["verdicts"] = verdicts(summary["groups"])
+    summary["task"] = task
     out.mkdir(parents=True, exist_ok=True)
     from policies.compare_report import plot_boxplots, plot_training_curves, render_report  # it imports us
 
     files = {"report": out / "report.md", "summary": out / "summary.json",
              "training_curves": out / "training_curves.png", "boxplots": out / "boxplots.png"}
+    if scripted_rows is not None:
+        for row, members in zip(summary["groups"], groups.values()):
+            row["metrics"] = [r.metrics for r in members]
+        hrl_runs = [r for r in loaded if r.config["algo"] == "hrl-sac"]
+        summary["baselines"] = scripted_rows
+        summary["constant_goals"] = compare_groups.constant_goal_rows(hrl_runs, split, scenarios)
+        rows = summary["groups"] + summary["constant_goals"] + scripted_rows
+        summary["strata"] = compare_groups.add_aggregates(rows, split, episodes, flight, task, environment)
+        hrl = next((row for row in summary["groups"] if row["algo"] == "hrl-sac"), None)
+        summary["task_verdicts"] = compare_groups.verdicts_against(hrl, [r for r in rows if r is not hrl]) \
+            if hrl else []
+        files["found_by"] = out / "found_by.png"
+        compare_groups.plot_found_by(rows, files["found_by"])
+        summary["scenarios"] = scenarios or f"the first {episodes} scenarios of the {split} split"
     plot_training_curves(groups, summary, files["training_curves"])
     plot_boxplots(groups, baselines, summary, files["boxplots"])
+    for row in summary["groups"] + summary.get("constant_goals", []) + summary["baselines"]:
+        row.pop("metrics", None)  # the per-episode lists stay in the runs' evaluation files
     _write_atomic(files["summary"], json.dumps(summary, indent=2))
     _write_atomic(files["report"], render_report(summary, groups, flight))
     summary["files"] = {name: str(path) for name, path in files.items()}

@@ -19,6 +19,11 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                         help="episodes per run and baseline (default: the runs' eval files' count, else 100)")
     parser.add_argument("--evaluate", action="store_true",
                         help="evaluate runs without an eval_SPLIT.json of that size (saved into the run folder)")
+    parser.add_argument("--streams", type=int, default=5,
+                        help="SarSearch-v1: detection streams (runs) per scripted searcher (default 5)")
+    parser.add_argument("--generator", default=None,
+                        help="SarSearch-v1: compare on this generator config file's scenarios (the runs' "
+                             "eval_SPLIT_generator-NAME.json of hrlsac evaluate --generator FILE)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
@@ -30,9 +35,23 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
     try:
         if args.runs and not args.out:
             raise CompareError("--out DIR is required (the folder for the report and the figures)")
+        if args.streams < 1:
+            raise CompareError(f"--streams must be >= 1, got {args.streams}")
+        generator = scenarios = None
+        if args.generator is not None:
+            from pathlib import Path
+
+            from policies.evaluate_cli import read_generator_config
+
+            try:
+                generator = read_generator_config(args.generator)
+            except ValueError as exc:
+                raise CompareError(str(exc)) from None
+            scenarios = f"generator-{Path(args.generator).stem}"
         summary = compare(args.runs, args.out, split=args.split, episodes=args.episodes, evaluate=args.evaluate,
                           command=shlex.join(["hrlsac", "compare", *argv]),
-                          progress=None if args.quiet else sys.stderr)
+                          progress=None if args.quiet else sys.stderr, streams=args.streams, generator=generator,
+                          scenarios=scenarios)
     except CompareError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2

@@ -131,6 +131,10 @@ def render_report(summary: dict, groups: dict[tuple[str, str], list[Run]], fligh
     out += [f"| {r['label']} | {_pct(r['detection_rate'])} | {_num(r['median_time_to_detection'])} | "
             f"{_num(r['median_steps_to_success'])} | {_pct(r['collision_rate'])} | {_pct(r['out_of_bounds_rate'])} |"
             for r in rows + baselines]
+    if summary.get("task") == "SarSearch-v1":
+        from policies.compare_groups import render_task_table
+
+        out += [""] + render_task_table(summary)
     out += ["", "## What the numbers say", ""] + [f"- {line}" for line in findings(summary, groups)]
     out += ["", "## Figures", "",
             "![Training curves](training_curves.png)", "",

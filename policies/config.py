@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.observation import FIELDS_BY_NAME, OBS_DIM
+from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
 from missions.mission import FlightSettings
 
 
@@ -48,6 +48,9 @@ class TrainConfig:
 
     algo: str = "hrl-sac"
     """"hrl-sac" (meta-controller + goal-conditioned SAC) or "sac" (flat SAC on the same observation)."""
+    task: str = "SarSearch-v1"
+    """The environment version trained on: "SarSearch-v1" (docs/environment.md) or "SarSearch-v0" (the paper's task;
+    runs written before the field existed were trained on it and load as such)."""
     preset: str = "default"
     """Name of the preset this config started from ("default" or "paper"); informational."""
     seed: int = 0
@@ -104,13 +107,14 @@ class TrainConfig:
     HRL-SAC over 3 seeds (comparison-v10 against v9): about +1 point on the val split, none on test (74.7 %)."""
     initial_alpha: float = 0.2
     """Initial entropy temperature of both levels."""
-    low_level_ignores: tuple[str, ...] = ("coverage",)
+    low_level_ignores: tuple[str, ...] = ("belief",)
     """Observation fields (``autonomy.observation.OBSERVATION_FIELDS`` names) that HRL-SAC's low-level actor and
     critics ignore: their inputs are multiplied by 0 (``networks.InputMask``), so the input stays 276 wide. Where
     to search is the meta-controller's choice; seeing the coverage map, the deterministic low level flew at 0.22
     of full speed on average (seed 0, 100,000 steps, 500 test episodes: 29.0 % success; masked: 59.4 %; a code
     variant masking only the actor: 35.6 %; docs/results/README.md). Flat SAC ignores
-    this field (it plans the search itself). The paper preset: () (the low level sees everything)."""
+    this field (it plans the search itself). The paper preset: () (the low level sees everything). SarSearch-v0's
+    map field is "coverage", v1's "belief"."""
 
     update_dtype: str = "bfloat16"
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
@@ -156,6 +160,13 @@ class TrainConfig:
     this phase cost no low-level update, so they run several times faster. 0 = off. Measured (3 seeds, 500 test
     episodes; docs/results/README.md): 100,000 of 200,000 steps alone, 70.9 % against 70.8 % without
     (comparison-v8); with ``meta_keep_best``, 74.7 % (comparison-v9)."""
+    meta_joint_goals: str = "learned"
+    """HRL-SAC's goals while both levels learn: "learned" (the meta-controller's, as in the paper) or "random"
+    (uniform, as in the warm-up; the meta-controller then learns only in the meta-only phase, against the low level
+    it will fly with, so ``meta_only_steps`` must be above 0). On SarSearch-v1 learned goals collapsed onto
+    ReturnToBase within 25,000 steps (meta entropy 0.06 against a target of 1.23: hovering at home cost less per
+    segment than the early low level's exits and collisions), and the low level then learned little but hovering
+    (docs/results/README.md)."""
     meta_only_entropy_scale: float = 0.1
     """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
     that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
@@ -195,6 +206,19 @@ class TrainConfig:
     the whole bonus (the detection probability is proportional to the intensity, while a cell counts as covered at
     any intensity >= 0.5). Off by default: on seed 0 (100,000 steps, 500 test scenarios) it raised the learned
     intensity, as meant, but not the success (68.0 % against 72.6 % without; docs/results/README.md)."""
+    belief_bonus: float = 0.0
+    """SarSearch-v1: low-level (and, with ``flat_shaping``, flat) reward plus this many times the belief the step's
+    look removed (``info["belief_removed"]``): the chance, under the crew's own model, that the look found the
+    victim, so with 100 (the success reward) it pays the expected value of the look. It reads only what the crew
+    knows. 0 = off."""
+    flat_shaping: bool = False
+    """Flat SAC learns from the shaping the HRL low level gets, towards the observation's target (TrackObject's
+    point: a candidate, else the most probable place): the progress to it, the cross-track penalty, the coverage
+    and belief bonuses, and the environment reward without its per-step cost (so leaving the area early, -10, is
+    never worth more than searching). False = the environment reward alone (the paper's flat SAC)."""
+    n_step: int = 1
+    """Continuous SAC (flat or low level): n-step returns, the reward of n steps discounted and the bootstrap by
+    gamma^n (cut short at an episode's end). 1 = one-step SAC."""
     detection_bonus: float = 0.0
     """Low-level reward times the probability that this step detects the victim for the first time (its
     detection probability where it is in the camera's view, 0 once it has been detected): the expected value of
@@ -240,14 +264,17 @@ class TrainConfig:
         if self.intrinsic_reward not in ("progress", "distance"):
             raise ValueError(f"TrainConfig.intrinsic_reward must be 'progress' or 'distance', "
                              f"got {self.intrinsic_reward!r}")
-        unknown = [name for name in self.low_level_ignores if name not in FIELDS_BY_NAME]
+        if self.task not in ("SarSearch-v0", "SarSearch-v1"):
+            raise ValueError(f"TrainConfig.task must be 'SarSearch-v0' or 'SarSearch-v1', got {self.task!r}")
+        names = self.layout.by_name
+        unknown = [name for name in self.low_level_ignores if name not in names]
         if unknown or isinstance(self.low_level_ignores, str):
-            raise ValueError(f"TrainConfig.low_level_ignores must be a list of observation field names "
-                             f"({', '.join(FIELDS_BY_NAME)}), got {self.low_level_ignores!r}")
+            raise ValueError(f"TrainConfig.low_level_ignores must be a list of {self.task} observation field names "
+                             f"({', '.join(names)}), got {self.low_level_ignores!r}")
         for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                                 ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
                                 ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1),
-                                ("meta_updates_per_transition", 1, 64), ("meta_only_steps", 0, 10**10),
+                                ("meta_updates_per_transition", 1, 64), ("meta_only_steps", 0, 10**10), ("n_step", 1, 64),
                                 ("eval_every", 0, 10**10), ("eval_episodes", 1, 100_000)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
@@ -258,11 +285,16 @@ class TrainConfig:
                                 ("per_beta_start", 0.0, 1.0), ("meta_target_entropy_scale", 0.0, 1.0),
                                 ("meta_only_entropy_scale", 0.0, 1.0), ("initial_alpha", 1e-6, 100.0),
                                 ("intrinsic_scale_m", 1e-3, 1e6), ("cross_track_penalty", 0.0, 1e3),
-                                ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3),
+                                ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4),
                                 ("action_margin", 0.0, 1.0)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        if self.meta_joint_goals not in ("learned", "random"):
+            raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', got {self.meta_joint_goals!r}")
+        if self.meta_joint_goals == "random" and self.meta_only_steps <= 0 and self.algo == "hrl-sac":
+            raise ValueError("TrainConfig.meta_joint_goals 'random' needs a meta-only phase for the meta-controller to "
+                             "learn in: set meta_only_steps above 0")
         if self.meta_keep_best and (self.eval_every <= 0 or self.meta_only_steps <= 0):
             raise ValueError("TrainConfig.meta_keep_best needs a meta-only phase and quick evaluations to choose "
                              f"from: set meta_only_steps and eval_every above 0 (got {self.meta_only_steps} and "
@@ -278,13 +310,18 @@ class TrainConfig:
         return self.total_steps - self.meta_only_steps if self.algo == "hrl-sac" else self.total_steps
 
     @property
+    def layout(self) -> ObservationLayout:
+        """The observation layout of the task trained on (version 3 for SarSearch-v0, 4 for v1)."""
+        return LAYOUT_V3 if self.task == "SarSearch-v0" else LAYOUT_V4
+
+    @property
     def low_level_input_mask(self) -> np.ndarray | None:
-        """(276,) 0 / 1: the observation features the continuous SAC's networks see; None = all of them."""
+        """(obs_dim,) 0 / 1: the observation features the continuous SAC's networks see; None = all of them."""
         if self.algo != "hrl-sac" or not self.low_level_ignores:
             return None
-        keep = np.ones(OBS_DIM, dtype=np.float32)
+        keep = np.ones(self.layout.dim, dtype=np.float32)
         for name in self.low_level_ignores:
-            keep[FIELDS_BY_NAME[name].slice] = 0.0
+            keep[self.layout.by_name[name].slice] = 0.0
         return keep
 
     @property
@@ -305,6 +342,8 @@ class TrainConfig:
                        meta_actor=meta, meta_critic=meta, flight=FlightSettings(max_steps=10_000))
         else:
             raise ValueError(f"unknown preset {name!r} (choose from default, paper)")
+        if overrides.get("task") == "SarSearch-v0" and "low_level_ignores" not in overrides and base.low_level_ignores:
+            overrides["low_level_ignores"] = ("coverage",)  # v0's map field
         return dataclasses.replace(base, **overrides)
 
     def to_dict(self) -> dict:
@@ -318,6 +357,7 @@ class TrainConfig:
             data[name] = NetworkConfig(**{**data[name], "hidden": tuple(data[name]["hidden"])})
         data["log_std_bounds"] = tuple(data["log_std_bounds"])
         data["missions"] = tuple(data.get("missions", ()))
+        data.setdefault("task", "SarSearch-v0")  # runs from before SarSearch-v1 trained on v0
         ignores = data.get("low_level_ignores", ())  # runs from before the field saw everything
         data["low_level_ignores"] = (ignores,) if isinstance(ignores, str) else tuple(ignores)
         return cls(**data)

@@ -1,4 +1,4 @@
-"""``SarSearch-v0``: the gymnasium environment (one search episode at a time).
+"""``SarSearch-v0`` and ``SarSearch-v1``: the gymnasium environment (one search episode at a time).
 
 A thin wrapper around :class:`policies.env_core.SarSearchBatch` with N = 1; the vectorised
 :class:`policies.vector_env.SarSearchVectorEnv` drives the same core, so both give the same results for the
@@ -11,8 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from autonomy.observation import OBSERVATION_HIGH, OBSERVATION_LOW
-from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchBatch, SarSearchConfig, next_episode_seed
+from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig, new_batch, next_episode_seed
 from missions.render import render_search
 
 
@@ -24,12 +23,12 @@ class SarSearchEnv(gym.Env):
     def __init__(self, config: SarSearchConfig | None = None, render_mode: str | None = None, **overrides: Any):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if overrides:  # gymnasium.make("SarSearch-v0", split="test", goal_conditioned=True)
+        if overrides:  # gymnasium.make("SarSearch-v1", split="test", goal_conditioned=True)
             config = SarSearchConfig(**{**(config.__dict__ if config else {}), **overrides})
         self.config = config or SarSearchConfig()
         self.render_mode = render_mode
-        self.core = SarSearchBatch(self.config, 1)
-        self.observation_space = gym.spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
+        self.core = new_batch(self.config, 1)
+        self.observation_space = gym.spaces.Box(self.core.layout.low, self.core.layout.high, dtype=np.float32)
         self.action_space = gym.spaces.Box(ACTION_LOW, ACTION_HIGH, dtype=np.float32)
         self._seed: int | None = None
         self._path: list[tuple[float, float]] = []

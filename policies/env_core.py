@@ -26,10 +26,13 @@ from typing import Sequence
 
 import numpy as np
 
-from autonomy.observation import META_OBS_DIM, OBS_DIM, observe_search
+from autonomy.observation import LAYOUT_V3, observe_search
 from missions import search
+from missions.belief_search import TARGET_SLOTS
+from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
+from missions.validation import check_fields
 from missions.search_state import SearchState, splitmix64
 from sitl_bridge import dynamics
 
@@ -51,10 +54,20 @@ def next_episode_seed(seed: np.ndarray) -> np.ndarray:
     return splitmix64(seed.astype(np.uint64) + np.uint64(1)) & np.uint64(0x7FFFFFFFFFFFFFFF)
 
 
+TASKS = ("SarSearch-v0", "SarSearch-v1")
+"""The environment versions: v0, the paper's task (victim-aware search logic, exact forecast, no endurance), kept
+for the runs trained on it; v1, the task of docs/environment.md (decoys, close looks, endurance, a belief)."""
+TASK_MAX_TARGETS = {"SarSearch-v0": 8, "SarSearch-v1": TARGET_SLOTS}
+"""Target slots per scenario by default. The detection draws are keyed by slot, so a task keeps its number: v0's
+8 reproduce its earlier runs exactly."""
+
+
 @dataclass(frozen=True)
 class SarSearchConfig:
     """Everything that defines the environment (the scenario source and how the search is flown)."""
 
+    task: str = "SarSearch-v1"
+    """Environment version, one of TASKS."""
     split: str = "train"
     """Generator split the scenarios come from ("train", "val" or "test") when ``scenarios`` is empty."""
     scenarios: tuple[Scenario, ...] = ()
@@ -70,12 +83,31 @@ class SarSearchConfig:
     detection; goal one-hot all zero."""
     airframe: dynamics.MultirotorParams | None = None
     """Vehicle limits; None = the SITL's defaults with the speed limit raised to max_speed_mps if needed."""
+    generator: GeneratorConfig | None = None
+    """The distribution generated scenarios come from; None = the task's (``GeneratorConfig()`` for v0,
+    ``missions.generator.TASK_V1`` for v1). Ignored when ``scenarios`` is given."""
+    max_targets: int | None = None
+    """Target slots per scenario (a scenario with more is refused); None = the task's (TASK_MAX_TARGETS)."""
+    max_obstacles: int = 4
+    """Danger-zone slots per scenario (a scenario with more is refused)."""
 
     def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ValueError(f"SarSearchConfig.task must be one of {', '.join(TASKS)}, got {self.task!r}")
         if not self.scenarios and self.split not in ("train", "val", "test"):
             raise ValueError(f"SarSearchConfig.split must be one of train, val, test, got {self.split!r}")
-        if not 1 <= self.pool_size <= 100_000:
-            raise ValueError(f"SarSearchConfig.pool_size must be in [1, 100000], got {self.pool_size}")
+        check_fields(self, (("pool_size", 1, 100_000), ("max_obstacles", 1, 64)),
+                     integers=("pool_size", "max_obstacles"))
+        if self.max_targets is not None:
+            check_fields(self, (("max_targets", 1, 256),), integers=("max_targets",))
+
+    @property
+    def target_slots(self) -> int:
+        return self.max_targets or TASK_MAX_TARGETS[self.task]
+
+    @property
+    def scenario_distribution(self) -> GeneratorConfig:
+        return self.generator or (TASK_V1 if self.task == "SarSearch-v1" else GeneratorConfig())
 
 
 class ScenarioSource:
@@ -103,9 +135,7 @@ class ScenarioSource:
         if self.config.scenarios:
             scenario = self.config.scenarios[row]
         else:
-            from missions.generator import generate_scenario, split_seed
-
-            scenario = generate_scenario(split_seed(self.config.split, row))
+            scenario = generate_scenario(split_seed(self.config.split, row), self.config.scenario_distribution)
         if len(scenario.targets) > self.max_targets or len(scenario.obstacles) > self.max_obstacles:
             raise ValueError(f"scenario {scenario.name!r} has {len(scenario.targets)} targets and "
                              f"{len(scenario.obstacles)} obstacles; the environment holds at most "
@@ -114,32 +144,34 @@ class ScenarioSource:
         self.scenarios[row] = scenario
 
 
-class SarSearchBatch(SearchState):
-    """N independent search episodes, stepped together: the search state (``missions.search_state``, shared
-    with the flight runtime) plus the vehicle dynamics, the reward and the observations. Arrays are (N, ...);
-    nothing here loops over N except resets, which copy each new episode's cached scenario arrays into its slot."""
+class FlownSearch:
+    """What every version's environment adds to its search state: the scenarios it draws, the vehicle dynamics,
+    the path flown, the episode return and the observations. A version's batch class inherits this and its
+    search state (``missions.search_state.SearchState`` or ``missions.belief_search.BeliefSearchState``)."""
 
-    def __init__(self, config: SarSearchConfig, num_envs: int, max_targets: int = 8, max_obstacles: int = 4):
+    config: SarSearchConfig
+
+    def _placeholder(self, config: SarSearchConfig, num_envs: int) -> search.ScenarioBatch:
+        """Set up the scenario source; returns the padded scenario arrays the search state starts from."""
         self.config = config
-        flight = config.flight
-        self.source = ScenarioSource(config, max_targets, max_obstacles)
-        self.airframe = config.airframe or dynamics.MultirotorParams(
+        self.source = ScenarioSource(config, config.target_slots, config.max_obstacles)
+        self.scenarios: list[Scenario | None] = [None] * num_envs
+        blank = search.ScenarioBatch.from_scenarios([Scenario()], num_targets=config.target_slots,
+                                                    num_obstacles=config.max_obstacles)
+        return blank.select(np.zeros(num_envs, dtype=np.int64))
+
+    def _setup_vehicles(self, obs_dim: int) -> None:
+        flight, n = self.config.flight, self.n
+        self.airframe = self.config.airframe or dynamics.MultirotorParams(
             max_speed_xy_mps=max(flight.max_speed_mps, dynamics.MultirotorParams().max_speed_xy_mps))
         self.wind = dynamics.Wind()  # the velocity controller holds the track; wind acts through drift
-        self.scenarios: list[Scenario | None] = [None] * num_envs
-        # Static per episode: the scenarios, packed (area, fence, datum, targets' categories, obstacles, ...).
-        placeholder = search.ScenarioBatch.from_scenarios([Scenario()], num_targets=max_targets,
-                                                          num_obstacles=max_obstacles)
-        super().__init__(placeholder.select(np.zeros(num_envs, dtype=np.int64)), flight)
-        n = self.n
         hover = dynamics.VehicleState(down_m=-flight.altitude_m, on_ground=False)
         self.vehicles = dynamics.BatchState.from_states([hover] * n)
         self.path_length_m = np.zeros(n)
         self.episode_return = np.zeros(n)
         self.last_action = np.zeros((n, 4))
-        self.obs = np.zeros((n, OBS_DIM), dtype=np.float32)
+        self.obs = np.zeros((n, obs_dim), dtype=np.float32)
 
-    # ------------------------------------------------------------------ resets
     def reset(self, indices, episode_seeds) -> None:
         """Start new episodes in slots ``indices`` with the scenarios and detection streams of ``episode_seeds``,
         and refresh their observations."""
@@ -153,7 +185,7 @@ class SarSearchBatch(SearchState):
         # Each episode starts at the start point, already at search altitude and hovering.
         scen, v = self.scen, self.vehicles
         v.north_m[indices], v.east_m[indices] = scen.start[indices, 0], scen.start[indices, 1]
-        v.down_m[indices] = -self.flight.altitude_m
+        v.down_m[indices] = -self.config.flight.altitude_m
         v.vn_mps[indices] = v.ve_mps[indices] = v.vd_mps[indices] = v.yaw_rad[indices] = 0.0
         v.battery_wh[indices] = self.airframe.battery_capacity_wh
         self.path_length_m[indices] = 0.0
@@ -161,7 +193,6 @@ class SarSearchBatch(SearchState):
         self.last_action[indices] = 0.0
         self.observe(indices)
 
-    # ------------------------------------------------------------------ goals (HRL-SAC)
     def set_goals(self, goals: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """Give environments a meta-controller goal (index into GOAL_NAMES), ground it to a point now and
         refresh their observations."""
@@ -169,7 +200,6 @@ class SarSearchBatch(SearchState):
         self.observe(np.flatnonzero(mask))
         return mask
 
-    # ------------------------------------------------------------------ observing and stepping
     def observe(self, indices: np.ndarray | None = None) -> np.ndarray:
         """Rebuild the observations of ``indices`` (all by default) into ``self.obs``; returns ``self.obs``."""
         if indices is not None and len(indices) == 0:
@@ -180,13 +210,9 @@ class SarSearchBatch(SearchState):
             self.obs[indices] = observe_search(self, self.config.goal_conditioned, rows=indices)
         return self.obs
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Advance every environment one decision; returns (obs, reward, terminated, truncated, info).
-
-        Finished environments are NOT reset here; the wrappers decide when (gymnasium's auto-reset rules).
-        The info arrays are views of live state, valid until the next call.
-        """
-        flight = self.flight
+    def fly(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The actions, clipped to their ranges, flown for one period; returns them and the positions reached."""
+        flight = self.config.flight
         a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.n, 4), ACTION_LOW, ACTION_HIGH)
         self.last_action[:] = a
         previous = self.position.copy()
@@ -194,6 +220,33 @@ class SarSearchBatch(SearchState):
                                 0.0, self.airframe, self.wind, self.time_s, flight.step_period_s, out=self.vehicles)
         position = np.stack([v.north_m, v.east_m], axis=1)
         self.path_length_m += np.hypot(position[:, 0] - previous[:, 0], position[:, 1] - previous[:, 1])
+        return a, position
+
+    @property
+    def meta_observation(self) -> np.ndarray:
+        """(N, meta_dim): what the meta-controller sees (everything but the goal one-hot)."""
+        return self.obs[:, :self.layout.meta_dim]
+
+
+class SarSearchBatch(FlownSearch, SearchState):
+    """SarSearch-v0: N independent search episodes, stepped together: the search state (``missions.search_state``,
+    shared with the flight runtime) plus the vehicle dynamics, the reward and the observations. Arrays are
+    (N, ...); nothing here loops over N except resets, which copy each new episode's cached scenario arrays."""
+
+    layout = LAYOUT_V3
+
+    def __init__(self, config: SarSearchConfig, num_envs: int):
+        SearchState.__init__(self, self._placeholder(config, num_envs), config.flight)
+        self._setup_vehicles(self.layout.dim)
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Advance every environment one decision; returns (obs, reward, terminated, truncated, info).
+
+        Finished environments are NOT reset here; the wrappers decide when (gymnasium's auto-reset rules).
+        The info arrays are views of live state, valid until the next call.
+        """
+        flight = self.flight
+        a, position = self.fly(actions)
         out = self.advance(position, a[:, 2], a[:, 3], flight.step_period_s)
 
         energy = a[:, ENERGY_COMPONENTS]
@@ -205,6 +258,7 @@ class SarSearchBatch(SearchState):
         # Views of the live arrays: valid until the next step (the wrappers copy what they hand out).
         info = {"success": out.success, "collision": out.collision, "out_of_bounds": out.out_of_bounds,
                 "distance_to_victim_m": out.distance_to_victim_m, "coverage_ratio": self.coverage_ratio,
+                "searched_cells": self.searched_cells,
                 "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,
                 "position": self.position, "goal_point": out.step_goal_point, "goal_reached": out.goal_reached,
                 # A sub-goal is completed when reaching it moves the search on, or on the episode's last step.
@@ -213,14 +267,23 @@ class SarSearchBatch(SearchState):
                 "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
 
-    @property
-    def meta_observation(self) -> np.ndarray:
-        """(N, 272): what the meta-controller sees."""
-        return self.obs[:, :META_OBS_DIM]
+
+def batch_class(task: str) -> type:
+    """The environment core of a task version."""
+    if task == "SarSearch-v1":
+        from policies.ambiguous_env import AmbiguousSearchBatch  # it builds on this module
+
+        return AmbiguousSearchBatch
+    return SarSearchBatch
 
 
-def make_batch(config: SarSearchConfig, seeds: Sequence[int]) -> SarSearchBatch:
+def new_batch(config: SarSearchConfig, num_envs: int):
+    """``num_envs`` environments of ``config.task`` (not reset yet)."""
+    return batch_class(config.task)(config, num_envs)
+
+
+def make_batch(config: SarSearchConfig, seeds: Sequence[int]):
     """A batch with every slot reset to its seed."""
-    batch = SarSearchBatch(config, len(seeds))
+    batch = new_batch(config, len(seeds))
     batch.reset(np.arange(len(seeds)), np.asarray(seeds, dtype=np.uint64))
     return batch

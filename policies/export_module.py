@@ -7,8 +7,8 @@ it cannot be switched back on by a ``.train()``), ``tanh`` squashing and the aff
 The operations are the eager ones in the same order, which is what makes the export agree with the eager
 policy to float32 rounding (tests/test_export.py).
 
-    PolicyModule.act(obs: Tensor[N, 276]) -> Tensor[N, 4]          ActionHead
-    PolicyModule.select_goal(obs: Tensor[N, 272]) -> Tensor[N]     GoalHead (HRL-SAC) or NoGoal (flat SAC: -1)
+    PolicyModule.act(obs: Tensor[N, 288]) -> Tensor[N, 4]          ActionHead
+    PolicyModule.select_goal(obs: Tensor[N, 284]) -> Tensor[N]     GoalHead (HRL-SAC) or NoGoal (flat SAC: -1)
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import copy
 import torch
 from torch import Tensor, nn
 
-from autonomy.observation import META_OBS_DIM, NO_GOAL, OBS_DIM
+from autonomy.observation import META_OBS_DIM, NO_GOAL, OBS_DIM, OBSERVATION_LAYOUT_VERSION
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.networks import ActionScaler, CategoricalActor, SquashedGaussianActor
 from policies.normalizer import RunningMeanStd
@@ -51,7 +51,7 @@ class FrozenNormalizer(nn.Module):
 
 
 class ActionHead(nn.Module):
-    """Raw observations (N, 276) -> deterministic actions (N, 4) in the environment's action ranges."""
+    """Raw observations (N, 288) -> deterministic actions (N, 4) in the environment's action ranges."""
 
     def __init__(self, normalizer: RunningMeanStd, actor: SquashedGaussianActor, scaler: ActionScaler):
         super().__init__()
@@ -69,7 +69,7 @@ class ActionHead(nn.Module):
 
 
 class GoalHead(nn.Module):
-    """Raw meta observations (N, 272) -> the most probable goal (N,) int64."""
+    """Raw meta observations (N, 284) -> the most probable goal (N,) int64."""
 
     def __init__(self, normalizer: RunningMeanStd, actor: CategoricalActor):
         super().__init__()
@@ -102,12 +102,12 @@ class PolicyModule(nn.Module):
 
     @torch.jit.export
     def act(self, obs: Tensor) -> Tensor:
-        """Raw observations (N, 276) -> actions (N, 4) in their ranges."""
+        """Raw observations (N, 288) -> actions (N, 4) in their ranges."""
         return self.action_head(obs)
 
     @torch.jit.export
     def select_goal(self, obs: Tensor) -> Tensor:
-        """Raw meta observations (N, 272) -> goal indices (N,) int64; -1 for flat SAC."""
+        """Raw meta observations (N, 284) -> goal indices (N,) int64; -1 for flat SAC."""
         return self.goal_head(obs)
 
     def forward(self, obs: Tensor) -> Tensor:
@@ -116,6 +116,11 @@ class PolicyModule(nn.Module):
 
 def policy_module(policy: CheckpointPolicy) -> PolicyModule:
     """The exportable module of a checkpoint policy (copies: later training does not change it)."""
+    layout = policy.config.layout
+    if layout.version != OBSERVATION_LAYOUT_VERSION:
+        raise ValueError(f"the policy was trained on {policy.config.task} (observation layout {layout.version}); "
+                         f"the runtime flies layout {OBSERVATION_LAYOUT_VERSION} ({OBS_DIM} values): train on "
+                         "SarSearch-v1 to export")
     if policy.low.obs_dim != OBS_DIM:
         raise ValueError(f"the low-level actor takes {policy.low.obs_dim} values, the observation has {OBS_DIM}")
     action_head = ActionHead(policy.normalizer, policy.low.actor, policy.low.scaler)

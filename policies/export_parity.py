@@ -53,8 +53,9 @@ def check_parity(policy: CheckpointPolicy, artifact: Policy, obs: np.ndarray) ->
 
 def record_observations(policy: CheckpointPolicy, count: int = PARITY_OBSERVATIONS, envs: int = 100,
                         seed: int = 0) -> np.ndarray:
-    """(count, 276) float32 observations met by flying ``policy`` (and random actions) on the val split."""
-    core = episode_batch("val", envs, policy.config.flight, goal_conditioned=policy.hierarchical)
+    """(count, 288) float32 observations met by flying ``policy`` (and random actions) on the val split."""
+    core = episode_batch("val", envs, policy.config.flight, goal_conditioned=policy.hierarchical,
+                         task=policy.config.task)
     rng = np.random.default_rng(seed)
     random_slots = np.arange(envs) % 2 == 1
     k, next_episode, recorded = policy.config.flight.subgoal_interval, envs, []

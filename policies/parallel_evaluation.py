@@ -17,7 +17,7 @@ Workers also compute with one torch thread each (:mod:`autonomy.worker_pool`), a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -47,6 +47,10 @@ class EpisodeChunk:
     """Episodes of the whole evaluation (the size of the scenario pool the chunk's episodes index)."""
     slots: range
     """The episodes (= scenario indices = episode seeds) this chunk flies."""
+    constant_goal: int | None = None
+    """HRL-SAC: fly this goal at every decision instead of the meta-controller's (the learned low level flies it)."""
+    environment: dict = field(default_factory=dict)
+    """Further ``SarSearchConfig`` fields: the scenarios (``generator``, or a fixed list ``scenarios``)."""
 
 
 def padded(fn: Callable[[np.ndarray], np.ndarray], rows: int = MIN_POLICY_ROWS) -> Callable[[np.ndarray], np.ndarray]:
@@ -66,13 +70,18 @@ def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
     """The per-episode outcome arrays of one chunk (runs in a worker, or in this process)."""
     policy = CheckpointPolicy.from_state(chunk.policy_state, Path(chunk.checkpoint))
     return fly_policy(policy, episode_batch(chunk.split, chunk.episodes, policy.config.flight,
-                                            goal_conditioned=policy.hierarchical, slots=chunk.slots))
+                                            goal_conditioned=policy.hierarchical, slots=chunk.slots,
+                                            task=policy.config.task, **chunk.environment), chunk.constant_goal)
 
 
-def fly_policy(policy: CheckpointPolicy, core) -> dict[str, np.ndarray]:
-    """The per-episode outcome arrays of ``policy`` (deterministic, padded calls) flying every slot of ``core``."""
+def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None) -> dict[str, np.ndarray]:
+    """The per-episode outcome arrays of ``policy`` (deterministic, padded calls) flying every slot of ``core``;
+    ``constant_goal``: that goal at every decision instead of the meta-controller's."""
     act = padded(policy.act)
-    return run_episodes(core, lambda batch: act(batch.obs), padded(policy.choose_goals) if policy.hierarchical else None)
+    choose = padded(policy.choose_goals) if policy.hierarchical else None
+    if constant_goal is not None:
+        choose = lambda meta_obs: np.full(len(meta_obs), constant_goal)  # noqa: E731
+    return run_episodes(core, lambda batch: act(batch.obs), choose)
 
 
 def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -81,21 +90,26 @@ def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]
 
 
 def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None = None,
-                       on_done: Callable[[int, int], None] | None = None) -> dict:
+                       on_done: Callable[[int, int], None] | None = None, environment: dict | None = None,
+                       constant_goal: int | None = None) -> dict:
     """The paper's metrics of the checkpoint at ``path`` (file or run folder) on the first ``episodes``
-    scenarios of ``split``, flown on ``pool`` (default: in this process). ``on_done(chunks_done, chunks)``
-    reports progress."""
+    scenarios of ``split`` (or of ``environment``'s: ``generator`` / ``scenarios``), flown on ``pool`` (default: in
+    this process). ``on_done(chunks_done, chunks)`` reports progress; ``constant_goal``: see :class:`EpisodeChunk`."""
     pool = pool or PoolConfig()
     path = checkpoint_file(path)
     state = load_checkpoint_state(path, path)  # a damaged or wrong file is one ValueError naming it
     policy_state = {key: state[key] for key in POLICY_STATE_KEYS}
     del state  # the replay buffers can be hundreds of MB; workers get only what acting needs
     config = TrainConfig.from_dict(policy_state["config"])
-    chunks = [EpisodeChunk(policy_state, str(path), split, episodes, slots)
+    if constant_goal is not None and config.algo != "hrl-sac":
+        raise ValueError(f"{path}: a constant goal needs an HRL-SAC run (this one is {config.algo})")
+    chunks = [EpisodeChunk(policy_state, str(path), split, episodes, slots, environment=dict(environment or {}),
+                           constant_goal=constant_goal)
               for slots in contiguous_chunks(episodes, pool.workers)]
     finished = []
     progress = None if on_done is None else (lambda index, _: (finished.append(index), on_done(len(finished), len(chunks))))
     record = merge_records(run_tasks(fly_chunk, chunks, pool, progress))
     return {"algo": config.algo, "preset": config.preset, "seed": config.seed, "checkpoint": str(path),
-            "trained_steps": int(policy_state["step"]), "split": split, "max_steps": config.flight.max_steps,
-            **summarise(record)}
+            "trained_steps": int(policy_state["step"]), "split": split, "task": config.task,
+            "max_steps": config.flight.max_steps, "constant_goal": constant_goal,
+            **summarise(record, config.flight.step_period_s)}

@@ -1,20 +1,16 @@
-"""Training HRL-SAC and flat SAC on ``SarSearch-v0``: one loop, readable top to bottom (CleanRL style).
+"""Training HRL-SAC and flat SAC on ``SarSearch-v1`` (or v0): one loop, readable top to bottom (CleanRL style).
 
 Per vector step (``num_envs`` environments at once):
 
 1. HRL-SAC only: every environment whose sub-goal has run K steps (or that starts an episode) gets a new goal
-   from the meta-controller (uniformly random during warm-up); the environment grounds it to a point g.
+   from the meta-controller (uniformly random during warm-up); the environment grounds it to a point g. The meta
+   transition stores the observation the meta-controller acted on (before the goal's point shows in it).
 2. The low-level (or flat) SAC acts on the normalised observation (uniform random during warm-up).
-3. Transitions are stored raw in prioritised replay: the low level's with reward the progress towards g
-   ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``, see
-   ``TrainConfig.intrinsic_reward``) minus ``cross_track_penalty`` x the distance flown sideways to the line to g,
-   + a bonus on completing g (reaching it, the search moving on) + a bonus per
-   newly covered cell (``coverage_bonus``; or per cell of ground swept by the footprint, ``coverage_swept``;
-   times the search intensity with ``coverage_by_intensity``) + ``detection_bonus`` x the probability that the
-   step detects the victim for the first time +
-   ``extrinsic_weight`` x the environment reward without its constant per-step cost for HRL-SAC, the environment
-   reward for flat SAC; the meta-controller's, once its goal has run K steps or the episode ended, with the K-step
-   discounted extrinsic return and discount ``meta_gamma ** k``.
+3. Transitions are stored raw in prioritised replay (n-step with ``n_step`` > 1): the low level's with the shaped
+   reward of ``policies.shaping`` (progress towards g, cross-track penalty, goal, coverage and belief bonuses);
+   flat SAC's with the environment reward, or with the same shaping towards its target (``flat_shaping``); the
+   meta-controller's, once its goal has run K steps or the episode ended, with the K-step discounted extrinsic
+   return and discount ``meta_gamma ** k``.
 4. After warm-up: ``updates_per_step`` low-level updates per environment step and
    ``meta_updates_per_transition`` meta updates (1 by default) per meta transition, with importance weights and
    new priorities from the TD errors.
@@ -43,16 +39,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from autonomy.observation import META_OBS_DIM, OBS_DIM
-from missions import search
 from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
-from policies.env_core import ACTION_HIGH, ACTION_LOW, CAMERA_ZOOM, REWARD_STEP, SEARCH_INTENSITY, SarSearchConfig
+from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
+from policies.n_step import NStepReturns
 from policies.normalizer import RunningMeanStd
 from policies.replay import PrioritizedReplayBuffer, linear_beta
 from policies.sac import SAC
+from policies.shaping import before_step, cross_track_m, shaped_reward  # noqa: F401  (cross_track_m: re-exported)
 from policies.vector_env import SarSearchVectorEnv
 
 CHECKPOINT = "checkpoint.pt"
@@ -69,15 +65,6 @@ def atomic_torch_save(obj, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def cross_track_m(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """(N,) metres each step from ``start`` to ``end`` moved sideways to the line from ``start`` to ``goal``:
-    |d x u| for the step d and the unit vector u towards the goal (0 where the drone is already at the goal)."""
-    step, to_goal = end - start, goal - start
-    length = np.hypot(*to_goal.T)
-    cross = np.abs(step[:, 0] * to_goal[:, 1] - step[:, 1] * to_goal[:, 0])
-    return np.divide(cross, length, out=np.zeros_like(length), where=length > 1e-6)
-
-
 class Trainer:
     """One training run in ``run_dir``; create with a config (new run) or with ``resume=True``."""
 
@@ -88,23 +75,28 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
         scenarios = tuple(load_mission(path).scenario for path in cfg.missions)
-        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(split=cfg.split, scenarios=scenarios,
+        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(task=cfg.task, split=cfg.split, scenarios=scenarios,
                                                                     flight=cfg.flight, goal_conditioned=self.hrl))
         self.rng = np.random.default_rng(cfg.seed)
-        self.normalizer = RunningMeanStd((OBS_DIM,))
-        self.low = SAC(OBS_DIM, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed, input_mask=cfg.low_level_input_mask)
-        self.low_buffer = PrioritizedReplayBuffer(cfg.buffer_size, {
-            "obs": ((OBS_DIM,), np.float32), "action": ((4,), np.float32), "reward": ((), np.float32),
-            "next_obs": ((OBS_DIM,), np.float32), "done": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed)
+        self.obs_dim, self.meta_dim = cfg.layout.dim, cfg.layout.meta_dim
+        self.normalizer = RunningMeanStd((self.obs_dim,))
+        self.low = SAC(self.obs_dim, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed,
+                       input_mask=cfg.low_level_input_mask)
+        fields = {"obs": ((self.obs_dim,), np.float32), "action": ((4,), np.float32), "reward": ((), np.float32),
+                  "next_obs": ((self.obs_dim,), np.float32), "done": ((), np.float32)}
+        if cfg.n_step > 1:  # one-step runs keep the buffer layout (and the numbers) they always had
+            fields["discount"] = ((), np.float32)
+        self.low_buffer = PrioritizedReplayBuffer(cfg.buffer_size, fields, cfg.per_alpha, cfg.per_eps, cfg.seed)
+        self.n_step = NStepReturns(cfg.n_step, cfg.sac_gamma, cfg.num_envs) if cfg.n_step > 1 else None
         self.meta = self.meta_buffer = None
         if self.hrl:
-            self.meta = DiscreteSAC(META_OBS_DIM, len(GOAL_NAMES), cfg, seed=cfg.seed + 1)
+            self.meta = DiscreteSAC(self.meta_dim, len(GOAL_NAMES), cfg, seed=cfg.seed + 1)
             self.meta_buffer = self._new_meta_buffer()
         n = cfg.num_envs
         self.step = 0  # environment steps so far (summed over environments)
         self.update_budget = 0.0
         self.needs_goal = np.ones(n, dtype=bool)
-        self.segment_obs = np.zeros((n, META_OBS_DIM), dtype=np.float32)
+        self.segment_obs = np.zeros((n, self.meta_dim), dtype=np.float32)
         self.segment_goal = np.zeros(n, dtype=np.int64)
         self.segment_return = np.zeros(n)
         self.segment_steps = np.zeros(n, dtype=np.int64)
@@ -126,8 +118,8 @@ class Trainer:
     def _new_meta_buffer(self) -> PrioritizedReplayBuffer:
         cfg = self.config
         return PrioritizedReplayBuffer(cfg.meta_buffer_size, {
-            "obs": ((META_OBS_DIM,), np.float32), "action": ((), np.int64), "reward": ((), np.float32),
-            "next_obs": ((META_OBS_DIM,), np.float32), "done": ((), np.float32),
+            "obs": ((self.meta_dim,), np.float32), "action": ((), np.int64), "reward": ((), np.float32),
+            "next_obs": ((self.meta_dim,), np.float32), "done": ((), np.float32),
             "discount": ((), np.float32)}, cfg.per_alpha, cfg.per_eps, cfg.seed + 1)
 
     @property
@@ -135,6 +127,11 @@ class Trainer:
         """True in the meta-only phase (``TrainConfig.meta_only_steps``): the low level and the normaliser are
         fixed and the low level flies its mean action. Never for flat SAC."""
         return self.hrl and self.step >= self.config.meta_only_from
+
+    @property
+    def meta_learns(self) -> bool:
+        """Whether the meta-controller chooses the goals and learns now (``TrainConfig.meta_joint_goals``)."""
+        return self.config.meta_joint_goals == "learned" or self.low_level_frozen
 
     # ------------------------------------------------------------------ acting
     def _norm(self, obs: np.ndarray) -> np.ndarray:
@@ -144,8 +141,8 @@ class Trainer:
         need = self.needs_goal
         if not need.any():
             return
-        meta_obs = self.obs[need, :META_OBS_DIM]
-        if self.step < self.config.warmup_steps:
+        meta_obs = self.obs[need, :self.meta_dim]
+        if self.step < self.config.warmup_steps or not self.meta_learns:
             goals = self.rng.integers(0, len(GOAL_NAMES), size=int(need.sum()))
         else:
             goals = self.meta.act(self._norm(meta_obs))
@@ -176,48 +173,33 @@ class Trainer:
             actions = self.rng.uniform(ACTION_LOW, ACTION_HIGH, size=(cfg.num_envs, 4)).astype(np.float32)
         else:
             actions = self.low.act(self._norm(self.obs), deterministic=frozen).astype(np.float32)
-        core = self.env.core
-        start, goal_before = core.position.copy(), core.goal_point.copy()
-        distance_before = np.hypot(*(start - goal_before).T)
-        covered_before = core.covered_cells.copy()
-        swept_from = self._sweep_start() if self.hrl and cfg.coverage_swept else None
+        start = before_step(self.env.core, self.hrl)
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
         for i in np.flatnonzero(done):
             real_next[i] = info["final_obs"][i]
-        if self.hrl:
-            distance = np.hypot(*(info["position"] - info["goal_point"]).T)  # the point this step flew to
-            reached = info["goal_reached"]  # (the environment has already grounded those goals again)
-            # The bonus pays for completing g (info["goal_completed"]), not for being within reach of it: over an
-            # unsearched cell with the sensor off the goal stays put, and a bonus for arriving paid every step of
-            # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
-            goal_completed = info["goal_completed"]
-            toward_goal = distance_before - distance if cfg.intrinsic_reward == "progress" else -distance
-            searched = self._searched_cells(actions, info, covered_before, swept_from)
-            sideways = cross_track_m(start, info["position"], goal_before) if cfg.cross_track_penalty else 0.0
-            low_reward = ((toward_goal - cfg.cross_track_penalty * sideways) / cfg.intrinsic_scale_m
-                          + cfg.intrinsic_goal_bonus * goal_completed
-                          + cfg.coverage_bonus * searched + cfg.detection_bonus * info["first_detection_chance"]
-                          + cfg.extrinsic_weight * (reward - REWARD_STEP))
-            self.segment_reached |= reached
+        if self.hrl or cfg.flat_shaping:
+            low_reward = shaped_reward(cfg, self.hrl, start, actions, info, reward)
         else:
             low_reward = reward
+        if self.hrl:
+            self.segment_reached |= info["goal_reached"]  # (the environment has already grounded those again)
         if not frozen:
-            self.low_buffer.add(obs=self.obs, action=actions, reward=low_reward.astype(np.float32),
-                                next_obs=real_next, done=terminated.astype(np.float32))
+            self._store_low(actions, low_reward.astype(np.float32), real_next, terminated, done)
             self.normalizer.update(self.obs)
         completed = 0
         if self.hrl:
             self.segment_return += cfg.meta_gamma ** self.segment_steps * reward
             self.segment_steps += 1
             finish = (self.segment_steps >= cfg.flight.subgoal_interval) | done
-            if finish.any():
+            if finish.any() and self.meta_learns:
                 self.meta_buffer.add(obs=self.segment_obs[finish], action=self.segment_goal[finish],
                                      reward=self.segment_return[finish].astype(np.float32),
-                                     next_obs=real_next[finish, :META_OBS_DIM],
+                                     next_obs=real_next[finish, :self.meta_dim],
                                      done=terminated[finish].astype(np.float32),
                                      discount=(cfg.meta_gamma ** self.segment_steps[finish]).astype(np.float32))
+            if finish.any():
                 self.recent_subgoals.extend(self.segment_reached[finish].astype(float).tolist())
                 self.needs_goal |= finish
                 completed = int(finish.sum())
@@ -254,27 +236,15 @@ class Trainer:
                 self.meta_buffer.update_priorities(indices, td)
                 self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
 
-    def _sweep_start(self) -> tuple[np.ndarray, np.ndarray]:
-        """The positions and grid-cell areas (m^2) before a step, for ``coverage_swept``; read before the step,
-        since an auto-reset may load another scenario into a slot."""
-        core = self.env.core
-        area = core.scen.area
-        return core.position.copy(), (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size
-
-    def _searched_cells(self, actions: np.ndarray, info: dict, covered_before: np.ndarray,
-                        swept_from: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
-        """What the low level's coverage bonus counts this step, in grid cells: the newly covered cells, or with
-        ``coverage_swept`` the ground the camera footprint swept (sensor on), either times the search intensity
-        with ``coverage_by_intensity``."""
-        cfg, intensity = self.config, actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
-        if swept_from is not None:
-            position_before, cell_area_m2 = swept_from
-            step_m = np.hypot(*(info["position"] - position_before).T)
-            half_width = search.footprint_half_width_m(cfg.flight.altitude_m, actions[:, CAMERA_ZOOM].clip(0.0, 1.0))
-            searched = step_m * 2.0 * half_width / cell_area_m2 * (intensity >= search.SENSOR_ON_INTENSITY)
-        else:
-            searched = info["coverage_ratio"] * self.env.core.coverage[0].size - covered_before
-        return searched * intensity if cfg.coverage_by_intensity else searched
+    def _store_low(self, actions: np.ndarray, reward: np.ndarray, real_next: np.ndarray, terminated: np.ndarray,
+                   done: np.ndarray) -> None:
+        if self.n_step is None:
+            self.low_buffer.add(obs=self.obs, action=actions, reward=reward, next_obs=real_next,
+                                done=terminated.astype(np.float32))
+            return
+        transitions = self.n_step.add(self.obs, actions, reward, real_next, terminated, done)
+        if transitions is not None:
+            self.low_buffer.add(**transitions)
 
     # ------------------------------------------------------------------ the loop
     def run(self, progress: bool = True, stop_at: int | None = None) -> Path:
@@ -330,7 +300,8 @@ class Trainer:
 
         cfg = self.config
         policy = CheckpointPolicy(cfg, self.normalizer, self.low, self.meta, self.step, self.run_dir)
-        record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=self.hrl))
+        record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=self.hrl,
+                                                  task=cfg.task))
         success = float(record["success"].mean())
         self.metrics["eval_success_rate"] = success
         if cfg.meta_keep_best and self.low_level_frozen and (self.best_meta is None
@@ -388,7 +359,7 @@ class Trainer:
                         self.segment_steps.copy(), self.segment_reached.copy()],
             "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(), "episodes": self.episodes,
             "recent": list(self.recent), "recent_subgoals": list(self.recent_subgoals), "metrics": dict(self.metrics),
-            "best_meta": self.best_meta,
+            "best_meta": self.best_meta, "n_step": self.n_step.pending if self.n_step else None,
         }
 
     def save(self) -> Path:
@@ -420,6 +391,8 @@ class Trainer:
         self.recent_subgoals.extend(state["recent_subgoals"])
         self.metrics = dict(state["metrics"])
         self.best_meta = state.get("best_meta")  # checkpoints from before meta_keep_best have none
+        if self.n_step is not None:
+            self.n_step.pending = state["n_step"]
         self._truncate_csv(self.step)
 
     def _truncate_csv(self, step: int) -> None:

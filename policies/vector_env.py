@@ -15,8 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from autonomy.observation import OBSERVATION_HIGH, OBSERVATION_LOW
-from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchBatch, SarSearchConfig, next_episode_seed
+from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig, new_batch, next_episode_seed
 
 
 class SarSearchVectorEnv(VectorEnv):
@@ -24,13 +23,15 @@ class SarSearchVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int, config: SarSearchConfig | None = None):
+    def __init__(self, num_envs: int, config: SarSearchConfig | None = None, **overrides):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if overrides:  # gymnasium.make_vec("SarSearch-v1", num_envs=64, vectorization_mode="vector_entry_point")
+            config = SarSearchConfig(**{**(config.__dict__ if config else {}), **overrides})
         self.config = config or SarSearchConfig()
         self.num_envs = num_envs
-        self.core = SarSearchBatch(self.config, num_envs)
-        self.single_observation_space = gym.spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
+        self.core = new_batch(self.config, num_envs)
+        self.single_observation_space = gym.spaces.Box(self.core.layout.low, self.core.layout.high, dtype=np.float32)
         self.single_action_space = gym.spaces.Box(ACTION_LOW, ACTION_HIGH, dtype=np.float32)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)

@@ -51,6 +51,7 @@ def make_run(root: Path, name: str, algo: str, seed: int, successes: int, **over
     """A run folder as hrlsac train + hrlsac evaluate leave it; returns (folder, per-episode record)."""
     run = root / name
     run.mkdir()
+    overrides.setdefault("task", "SarSearch-v0")  # the report's own statistics; SarSearch-v1's rows: test_v1_rows
     config = TrainConfig.from_preset("default", algo=algo, seed=seed, total_steps=20_000, **overrides).to_dict()
     config["flight"]["max_steps"] = MAX_STEPS
     (run / "config.json").write_text(json.dumps(config, indent=2))
@@ -137,9 +138,10 @@ def test_report_statistics_verdict_commands_and_figures(runs, tmp_path):
 
     # the commands: reconstructed training commands, evaluation commands and the compare command
     hrl0, sac2 = runs[("hrl-sac", 0)][0], runs[("sac", 2)][0]
-    assert (f"hrlsac train --algo hrl-sac --preset default --steps 20000 --seed 0 --num-envs 4 "
-            f"--set warmup_steps=500 --out {hrl0}  # config.json also sets flight.max_steps=500") in report
-    assert f"hrlsac train --algo sac --preset default --steps 20000 --seed 2 --out {sac2}" in report
+    assert (f"hrlsac train --algo hrl-sac --preset default --steps 20000 --seed 0 --set task=SarSearch-v0 "
+            f"--num-envs 4 --set warmup_steps=500 --out {hrl0}  # config.json also sets flight.max_steps=500") in report
+    assert f"hrlsac train --algo sac --preset default --steps 20000 --seed 2 --set task=SarSearch-v0 --out {sac2}" \
+        in report
     assert f"hrlsac evaluate {sac2} --split test --episodes {EPISODES}" in report
     assert summary["command"] in report and summary["command"].startswith("hrlsac compare ")
     assert "## Per-seed results" in report and "### flat SAC (default)" in report

@@ -1,5 +1,6 @@
-"""SarSearch-v0: gymnasium API, observation layout, each reward component, detection and coverage in the
-environment, seeding, and the single and vectorised forms agreeing."""
+"""SarSearch-v0 (kept for the runs trained on it): gymnasium API, observation layout, each reward component,
+detection and coverage in the environment, seeding, and the single and vectorised forms agreeing. SarSearch-v1's
+are in tests/test_env_v1.py."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,8 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import policies  # noqa: F401  (registers SarSearch-v0)
-from autonomy.observation import (FIELDS_BY_NAME, META_OBS_DIM, OBS_DIM, OBSERVATION_FIELDS,
-                                  TARGET_OFFSET_SCALE_M)
+from autonomy.observation import LAYOUT_V3, TARGET_OFFSET_SCALE_M
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
 from missions.scenario import Conditions, Obstacle, Scenario, SeaState, SearchArea, Target, TimeOfDay, Weather
@@ -20,6 +20,9 @@ from policies.env import SarSearchEnv
 from policies.env_core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_STEP, REWARD_TARGET, SarSearchConfig
 from policies.vector_env import SarSearchVectorEnv
 
+V0 = "SarSearch-v0"
+FIELDS_BY_NAME, OBSERVATION_FIELDS = LAYOUT_V3.by_name, LAYOUT_V3.fields
+OBS_DIM, META_OBS_DIM = LAYOUT_V3.dim, LAYOUT_V3.meta_dim
 AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)
 HOVER = np.array([0.0, 0.0, 0.0, 0.0], dtype=np.float32)
 NORTH = np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32)
@@ -45,7 +48,7 @@ def scenario(victim=(600.0, 100.0), datum=(550.0, 80.0), obstacles=(), condition
 
 
 def env_for(*scenarios: Scenario, goal_conditioned: bool = False, **flight) -> SarSearchEnv:
-    return SarSearchEnv(SarSearchConfig(scenarios=scenarios, flight=FlightSettings(**flight),
+    return SarSearchEnv(SarSearchConfig(task=V0, scenarios=scenarios, flight=FlightSettings(**flight),
                                         goal_conditioned=goal_conditioned))
 
 
@@ -273,7 +276,7 @@ def test_first_detection_chance_is_the_victims_detection_probability_until_it_is
 
 
 def test_coverage_never_decreases_over_a_random_flight():
-    env = SarSearchEnv(SarSearchConfig(split="train"))
+    env = SarSearchEnv(SarSearchConfig(task=V0, split="train"))
     obs, _ = env.reset(seed=11)
     rng = np.random.default_rng(0)
     previous = field(obs, "coverage").copy()
@@ -302,8 +305,8 @@ def rollout(env: SarSearchEnv, seed: int, actions: np.ndarray) -> list:
 
 def test_same_seed_same_episode():
     actions = np.random.default_rng(3).uniform([-1, -1, 0, 0], 1, size=(300, 4)).astype(np.float32)
-    a, b = rollout(SarSearchEnv(), 5, actions), rollout(SarSearchEnv(), 5, actions)
-    c = rollout(SarSearchEnv(), 6, actions)
+    a, b = rollout(SarSearchEnv(task=V0), 5, actions), rollout(SarSearchEnv(task=V0), 5, actions)
+    c = rollout(SarSearchEnv(task=V0), 6, actions)
     assert len(a) == len(b)
     for x, y in zip(a, b):
         np.testing.assert_array_equal(x[0] if isinstance(x, tuple) else x, y[0] if isinstance(y, tuple) else y)
@@ -312,7 +315,7 @@ def test_same_seed_same_episode():
 
 def test_vectorised_env_equals_single_envs_step_for_step():
     n, steps, seed = 4, 600, 20
-    config = SarSearchConfig(flight=FlightSettings(max_steps=150))
+    config = SarSearchConfig(task=V0, flight=FlightSettings(max_steps=150))
     rng = np.random.default_rng(1)
     actions = rng.uniform([-1, -1, 0, 0], 1, size=(steps, n, 4)).astype(np.float32)
     vec = SarSearchVectorEnv(n, config)
@@ -335,7 +338,7 @@ def test_vectorised_env_equals_single_envs_step_for_step():
 
 
 def test_render_draws_the_search():
-    env = SarSearchEnv(render_mode="rgb_array")
+    env = SarSearchEnv(render_mode="rgb_array", task=V0)
     env.reset(seed=2)
     first = env.render()
     for _ in range(30):
@@ -348,7 +351,7 @@ def test_render_draws_the_search():
 
 def test_stable_baselines3_sac_trains_on_the_environment():
     sb3 = pytest.importorskip("stable_baselines3")
-    env = SarSearchEnv(SarSearchConfig(flight=FlightSettings(max_steps=200)))
+    env = SarSearchEnv(SarSearchConfig(task=V0, flight=FlightSettings(max_steps=200)))
     model = sb3.SAC("MlpPolicy", env, learning_starts=200, buffer_size=5_000, batch_size=64,
                     policy_kwargs={"net_arch": [64, 64]}, seed=0, device="cpu", verbose=0)
     before = model.policy.actor.mu.weight.detach().clone()

@@ -117,7 +117,7 @@ def test_plain_torch_loaders_run_the_artifact(runs, artifacts, recorded, fmt):
             actions, goals = module.act(obs), module.select_goal(obs[:, :META_OBS_DIM])
             module.train()  # Dropout is gone from the artifact: train mode cannot make it random
             assert torch.equal(module.act(obs), actions)
-            with pytest.raises(torch.jit.Error, match=r"shape \(N, 276\)"):
+            with pytest.raises(torch.jit.Error, match=r"shape \(N, 288\)"):
                 module.act(obs[:, :275])
         else:
             extra = {"manifest.json": ""}  # torch.export.load fills a non-empty dict only
@@ -189,11 +189,22 @@ def write_with_manifest(runs, path: Path, fmt: str, **changes) -> Path:
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_refuses_an_artifact_with_another_observation_layout(runs, tmp_path, fmt):
     current = build_manifest(CheckpointPolicy.load(runs["hrl-sac"]), fmt, "0" * 64).observation
-    fields = tuple({**f, "size": 64} if f["name"] == "coverage" else f for f in current.fields)
+    fields = tuple({**f, "size": 64} if f["name"] == "belief" else f for f in current.fields)
     path = write_with_manifest(runs, tmp_path / "policy.pt", fmt,
                                observation=dataclasses.replace(current, fields=fields))
     message = single_line_error(path, "observation layout of the artifact does not match")
-    assert "field 'coverage' at offset 16 size 64 vs 'coverage' at offset 16 size 256" in message
+    assert "field 'belief' at offset 16 size 64 vs 'belief' at offset 16 size 256" in message
+    v0 = write_with_manifest(runs, tmp_path / "v0.pt", fmt, observation=dataclasses.replace(current, layout_version=3))
+    assert "layout_version 3 vs 4" in single_line_error(v0, "observation layout of the artifact does not match")
+
+
+def test_a_sarsearch_v0_run_is_not_exported_for_the_runtime_that_flies_v1():
+    from policies.config import TrainConfig
+    from policies.export_module import policy_module
+
+    v0 = CheckpointPolicy.untrained(TrainConfig.from_preset("default", task="SarSearch-v0"))
+    with pytest.raises(ValueError, match=r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"):
+        policy_module(v0)
 
 
 def test_refuses_an_unknown_format_version(runs, tmp_path):
@@ -234,7 +245,7 @@ def test_runtime_exposes_the_hierarchy(artifacts, recorded):
     assert action.shape == (4,) and action.dtype == np.float32
     np.testing.assert_allclose(action, hierarchical.act(obs)[0], rtol=0, atol=ACTION_TOLERANCE)  # other batch size
     assert 0 <= int(goal) < len(GOAL_NAMES)
-    with pytest.raises(ValueError, match=r"shape \(N, 276\)"):
+    with pytest.raises(ValueError, match=r"shape \(N, 288\)"):
         hierarchical.act(obs[:, :META_OBS_DIM])
 
 
@@ -255,7 +266,7 @@ obs = np.load({str(tmp_path / "obs.npy")!r})
 out = []
 for path in {paths!r}:
     policy = load_policy(path)
-    out.append([policy.act(obs).tolist(), policy.select_goal(obs[:, :272]).tolist()])
+    out.append([policy.act(obs).tolist(), policy.select_goal(obs[:, :284]).tolist()])
 assert "policies" not in sys.modules and "gymnasium" not in sys.modules, sorted(sys.modules)
 print(json.dumps(out))
 """
@@ -290,7 +301,7 @@ def test_export_and_policy_info_commands(runs, tmp_path, capsys):
     assert policy_main(["info", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "check: ok" in printed and "ReturnToBase: home" in printed
-    assert "coverage         offset  16 size 256" in printed
+    assert "belief           offset  16 size 256" in printed
     assert policy_main(["info", "--json", str(out)]) == 0
     assert json.loads(capsys.readouterr().out)["algorithm"] == "hrl-sac"
 

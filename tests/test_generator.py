@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from missions.generator import (SPLIT_SEED_STRIDE, SPLITS, GeneratorConfig, generate_scenario, generate_split,
-                                scenario_name, scenario_seeds, split_seed)
+from missions.generator import (SPLIT_SEED_STRIDE, SPLITS, TASK_V1, GeneratorConfig, generate_scenario,
+                                generate_split, scenario_name, scenario_seeds, split_seed)
 from missions.scenario import Weather
 
 
@@ -110,6 +110,8 @@ def test_distribution_is_roughly_as_documented(many):
     ("max_distractors", -1), ("max_obstacles", 21), ("obstacle_radius_max_m", 5.0), ("visibility_min", 0.1),
     ("visibility_max", 1.2), ("fog_visibility_max", 0.2), ("wind_beta_a", 0.0), ("max_current_mps", 4.0),
     ("min_datum_distance_m", 2000.0), ("primary_categories", ()), ("primary_categories", ("kayak",)),
+    ("decoys_max", 21), ("decoys_min", 3), ("decoy_spread_sigmas", 0.0), ("endurance_max_s", 30.0),
+    ("endurance_min_s", 10.0), ("forecast_error_mps", 2.0),
 ])
 def test_config_validation_names_the_field(field, value):
     with pytest.raises(ValueError, match=f"GeneratorConfig.{field}"):
@@ -125,3 +127,27 @@ def test_a_custom_config_is_respected():
         assert s.area.north_min_m == 0.0 and s.area.north_max_m == 400.0 and s.area.east_max_m == 200.0
         assert len(s.targets) == 1 and s.primary.category == "swimmer" and not s.obstacles
         assert 10.0 <= s.datum_sigma_m <= 20.0 and math.hypot(s.datum_north_m, s.datum_east_m) >= 100.0
+
+
+def test_sarsearch_v1_adds_decoys_an_endurance_and_a_forecast_error_to_the_v0_scenario():
+    decoys, endurance, errors, spreads = [], [], [], []
+    for seed in range(300):
+        v0, v1 = generate_scenario(seed), generate_scenario(seed, TASK_V1)
+        assert v1.targets[:len(v0.targets)] == v0.targets and v1.obstacles == v0.obstacles  # the rest is v0's
+        assert (v1.conditions, v1.datum_north_m, v1.current_north_mps) == (v0.conditions, v0.datum_north_m,
+                                                                         v0.current_north_mps)
+        extra = v1.targets[len(v0.targets):]
+        assert all(t.category == v1.primary.category and not t.primary for t in extra)  # look-alikes of the victim
+        decoys.append(len(extra))
+        spreads += [math.hypot(t.north_m - v1.datum_north_m, t.east_m - v1.datum_east_m) / v1.datum_sigma_m
+                    for t in extra]
+        endurance.append(v1.endurance_s)
+        errors.append(v1.forecast_current_north_mps - v1.current_north_mps)
+        for t in extra:  # clear of the danger zones, as a close look must reach them
+            assert all(math.hypot(t.north_m - o.north_m, t.east_m - o.east_m) - o.radius_m >= 30.0
+                       for o in v1.obstacles)
+        assert v0.endurance_s is None and v0.forecast_current_north_mps is None
+    assert set(decoys) <= {1, 2, 3, 4} and min(decoys) == 1 and max(decoys) == 4
+    assert 600.0 <= min(endurance) and max(endurance) <= 900.0
+    assert abs(np.std(errors) - 0.05) < 0.01
+    assert 1.5 < np.median(spreads) < 4.5  # normal with 2.5 sigmas per axis: a median radius of about 2.9 sigmas

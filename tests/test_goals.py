@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from missions.goals import (EXPLORE, HAZARD_MARGIN_M, RETURN_TO_BASE, SEARCH_LOCATION, TRACK_OBJECT, ground_goals,
-                           route_around_hazards)
+from missions.goals import (EXPLORE, HAZARD_MARGIN_M, RETURN_TO_BASE, SEARCH_LOCATION, TRACK_OBJECT, TRAVEL_SCALE_M,
+                           ground_goals, ground_goals_v1, route_around_hazards)
 
 AREA = np.array([[-50.0, 950.0, -500.0, 500.0]])  # 32 x 32 cells of 31.25 m; 8 x 8 blocks of 125 m
 
@@ -167,3 +167,47 @@ def test_goal_points_stay_inside_the_area_by_the_fence_margin():
                           np.array([[0.0, 0.0], [-50.0, 500.0]]))
     np.testing.assert_allclose(points, [[950.0 - FENCE_MARGIN_M, -500.0 + FENCE_MARGIN_M],
                                         [-50.0 + FENCE_MARGIN_M, 500.0 - FENCE_MARGIN_M]])
+
+
+# ---------------------------------------------------------------------------------------------- SarSearch-v1
+
+def ground_v1(goal, agent=(0.0, 0.0), belief_cells=(((20, 19), 1.0),), searched=None, candidates=(), home=(0.0, 0.0),
+              offset=(0.0, 0.0)):
+    """SarSearch-v1's grounding with a belief that is zero but for ``belief_cells`` and candidates (point, kind)."""
+    belief = np.zeros((1, 32, 32))
+    for (row, col), value in belief_cells:
+        belief[0, row, col] = value
+    searched = np.zeros((1, 32, 32)) if searched is None else searched[None]
+    points = np.zeros((1, 16, 2))
+    kind = np.zeros((1, 16), dtype=np.int64)
+    for k, (point, what) in enumerate(candidates):
+        points[0, k], kind[0, k] = point, what
+    return ground_goals_v1(np.array([goal]), np.array([agent], dtype=float), AREA, searched, belief,
+                           np.array([offset]), points, kind, np.array([(600.0, 100.0)]), np.array([home]),
+                           np.zeros((1, 1, 3)), np.zeros((1, 1), dtype=bool))[0]
+
+
+def test_v1_search_location_is_the_most_belief_per_travel_where_its_water_is_now():
+    np.testing.assert_allclose(ground_v1(SEARCH_LOCATION), cell_centre(20, 19))
+    shifted = ground_v1(SEARCH_LOCATION, offset=(10.0, -5.0))
+    np.testing.assert_allclose(shifted, np.array(cell_centre(20, 19)) + (10.0, -5.0))
+    # two cells, the far one 1.5 times as likely: exp(-distance / 200 m) picks the near one 400 m closer
+    cells = (((5, 16), 1.0), ((20, 16), 1.5))
+    np.testing.assert_allclose(ground_v1(SEARCH_LOCATION, agent=cell_centre(5, 16), belief_cells=cells),
+                               cell_centre(5, 16))
+    assert TRAVEL_SCALE_M == 200.0 and 1.5 * np.exp(-(15 * 31.25) / 200.0) < 1.0
+
+
+def test_v1_track_object_is_the_confirmed_victim_else_the_nearest_unresolved_candidate():
+    near, far, victim = (100.0, 50.0), (400.0, -100.0), (700.0, 200.0)
+    np.testing.assert_allclose(ground_v1(TRACK_OBJECT, candidates=[(far, 1), (near, 1)]), near)
+    np.testing.assert_allclose(ground_v1(TRACK_OBJECT, candidates=[(near, 1), (victim, 2)]), victim)
+    np.testing.assert_allclose(ground_v1(TRACK_OBJECT, candidates=[(near, 0)]), ground_v1(SEARCH_LOCATION))
+
+
+def test_v1_explore_is_blind_to_the_belief_and_avoids_searched_blocks():
+    searched = np.zeros((32, 32))
+    searched[0:4, 16:20] = 1.0  # the block in front of home: searched
+    point = ground_v1(EXPLORE, agent=(10.0, 10.0), searched=searched)
+    assert not (-50.0 <= point[0] <= 75.0 and 0.0 <= point[1] <= 125.0)
+    assert np.hypot(*point) < 200.0  # the nearest unsearched block, not the belief's peak 600 m away

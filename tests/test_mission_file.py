@@ -508,3 +508,42 @@ def test_dataset_reference_with_the_real_loader(dataset_layout: Path, monkeypatc
     assert "'img_0041' yields no scenario" in str(error_of(dataset_mission(dataset_layout, image="img_0041")))
     assert "scenario.dataset.split: cannot list split 'val'" in str(error_of(dataset_mission(dataset_layout,
                                                                                               split="val")))
+
+
+# ------------------------------------------------------------------------------------------- SarSearch-v1 fields
+
+def test_endurance_and_forecast_current_load_validate_and_round_trip(tmp_path: Path) -> None:
+    data = changed(scenario__endurance_s=750, scenario__current={"north_mps": 0.1, "east_mps": 0.0,
+                                                                 "forecast_north_mps": 0.15, "forecast_east_mps": -0.02})
+    mission = load_mission(write(tmp_path, data))
+    s = mission.scenario
+    assert (s.endurance_s, s.forecast_current_north_mps, s.forecast_current_east_mps) == (750.0, 0.15, -0.02)
+    assert isinstance(s.endurance_s, float)
+    save_mission(mission, tmp_path / "again.yaml")
+    assert load_mission(tmp_path / "again.yaml") == mission
+    plain = load_mission(write(tmp_path, BASE, "plain.yaml")).scenario  # both optional: unlimited, exact forecast
+    assert plain.endurance_s is None and plain.forecast_current_north_mps is None
+    assert "endurance_s" not in yaml.safe_load(_saved(tmp_path, plain))["scenario"]
+    assert str(error_of(write(tmp_path, changed(scenario__endurance_s=5), "short.yaml"))).endswith(
+        "scenario.endurance_s: must be a number in [10, 1e+06], got 5")
+    bad = changed(scenario__current={"north_mps": 0.1, "forecast_north_mps": 9})
+    assert "scenario.current.forecast_north_mps: must be a number in [-5, 5], got 9" in str(error_of(write(
+        tmp_path, bad, "fast.yaml")))
+
+
+def _saved(folder: Path, scenario: Scenario) -> str:
+    save_mission(Mission(scenario=scenario), folder / "saved.yaml")
+    return (folder / "saved.yaml").read_text()
+
+
+def test_a_generator_reference_may_draw_from_sarsearch_v1() -> None:
+    from missions.generator import TASK_V1, generate_scenario, scenario_seeds
+
+    folder = Path(__file__).parent
+    data = changed(scenario={"generator": {"split": "test", "index": 3, "task": "SarSearch-v1"}})
+    mission = mission_from_dict(data, folder)
+    assert mission.scenario == generate_scenario(scenario_seeds("test", 4)[3], TASK_V1)
+    assert mission.scenario.endurance_s is not None
+    with pytest.raises(MissionFileError, match="scenario.generator.task: 'SarSearch-v2' is not one of sarsearch-v0, "
+                                               "sarsearch-v1"):
+        mission_from_dict(changed(scenario={"generator": {"seed": 3, "task": "SarSearch-v2"}}), folder)

@@ -588,12 +588,14 @@ def test_update_dtype_is_validated():
 
 
 # ---------------------------------------------------------------------------------------------------- input mask
-def test_low_level_input_mask_ignores_the_coverage_map_and_only_for_hrl_sac():
-    from autonomy.observation import FIELDS_BY_NAME
+def test_low_level_input_mask_ignores_the_map_and_only_for_hrl_sac():
+    from autonomy.observation import LAYOUT_V3, LAYOUT_V4
 
-    coverage = FIELDS_BY_NAME["coverage"].slice
+    belief = LAYOUT_V4.by_name["belief"].slice
     mask = TrainConfig().low_level_input_mask
-    assert mask.shape == (276,) and mask[coverage].sum() == 0 and mask.sum() == 276 - 256
+    assert mask.shape == (288,) and mask[belief].sum() == 0 and mask.sum() == 288 - 256
+    v0 = TrainConfig.from_preset("default", task="SarSearch-v0").low_level_input_mask  # v0's map is "coverage"
+    assert v0.shape == (276,) and v0[LAYOUT_V3.by_name["coverage"].slice].sum() == 0 and v0.sum() == 276 - 256
     assert TrainConfig(algo="sac").low_level_input_mask is None  # flat SAC plans the search itself
     assert TrainConfig.from_preset("paper").low_level_input_mask is None  # the paper's low level sees all
     assert TrainConfig(low_level_ignores=()).low_level_input_mask is None
@@ -611,9 +613,9 @@ def test_runs_from_before_the_intensity_weighted_coverage_bonus_load_as_trained(
 
 
 def test_unknown_ignored_field_is_refused_with_the_field_names():
-    with pytest.raises(ValueError, match=r"low_level_ignores must be a list of observation field names "
-                                         r"\(agent_position, target_offset, .*goal\), got \('coverege',\)"):
-        TrainConfig(low_level_ignores=("coverege",))
+    with pytest.raises(ValueError, match=r"low_level_ignores must be a list of SarSearch-v1 observation field names "
+                                         r"\(agent_position, target_offset, .*goal\), got \('coverage',\)"):
+        TrainConfig(low_level_ignores=("coverage",))  # SarSearch-v0's field, not v1's
 
 
 def test_masked_inputs_change_no_output_and_get_no_gradient():

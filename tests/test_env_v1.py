@@ -1,0 +1,140 @@
+"""SarSearch-v1: gymnasium API, the observation's new fields, each reward of the task's ends, the configurable caps,
+and the single and vectorised forms agreeing."""
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import policies  # noqa: F401  (registers SarSearch-v1)
+from autonomy.observation import LAYOUT_V4, PLAN_OFFSET_SCALE_M
+from missions.mission import FlightSettings
+from missions.scenario import Obstacle, Scenario, SearchArea, Target
+from policies.ambiguous_env import REWARD_RAN_DRY, REWARD_RETURNED, RETURN_RESERVE
+from policies.env import SarSearchEnv
+from policies.env_core import REWARD_STEP, REWARD_TARGET, SarSearchConfig
+from policies.vector_env import SarSearchVectorEnv
+
+AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)
+HOVER = np.zeros(4, dtype=np.float32)
+FIELDS = LAYOUT_V4.by_name
+
+
+def field(obs: np.ndarray, name: str) -> np.ndarray:
+    return obs[FIELDS[name].slice]
+
+
+def env_for(victim=(600.0, 100.0), decoys=(), endurance_s=None, goal_conditioned=False, **flight) -> SarSearchEnv:
+    targets = (Target("person", *victim, primary=True),) + tuple(Target("person", *d) for d in decoys)
+    scenario = Scenario(area=AREA, datum_north_m=550.0, datum_east_m=80.0, datum_sigma_m=80.0, targets=targets,
+                        endurance_s=endurance_s, name="test")
+    return SarSearchEnv(SarSearchConfig(scenarios=(scenario,), flight=FlightSettings(**flight),
+                                        goal_conditioned=goal_conditioned))
+
+
+def fly_to(env: SarSearchEnv, point, zoom=0.0, limit=400):
+    """Fly straight at ``point`` and hover there; yields each step's (reward, terminated, info)."""
+    for _ in range(limit):
+        offset = np.asarray(point) - env.unwrapped.core.position[0]
+        distance = float(np.hypot(*offset))
+        action = np.zeros(4, dtype=np.float32)
+        action[:2] = offset / max(distance, 1e-9) * min(1.0, distance / 10.0)
+        action[2], action[3] = 1.0, zoom if distance < 15.0 else 0.0
+        _, reward, terminated, truncated, info = env.step(action)
+        yield reward, terminated, info
+        if terminated or truncated:
+            return
+
+
+def test_gymnasium_check_env_passes_and_the_layout_is_version_4():
+    check_env(gymnasium.make("SarSearch-v1").unwrapped)
+    check_env(gymnasium.make("SarSearch-v1", goal_conditioned=True).unwrapped)
+    env = gymnasium.make("SarSearch-v1", split="val")
+    obs, info = env.reset(seed=3)
+    assert obs.shape == (LAYOUT_V4.dim,) == (288,) and LAYOUT_V4.meta_dim == 284
+    assert info["scenario"].startswith("gen-val-")
+    vec = gymnasium.make_vec("SarSearch-v1", num_envs=3, vectorization_mode="vector_entry_point")
+    assert vec.reset(seed=1)[0].shape == (3, 288)
+
+
+def test_the_new_fields_say_what_a_crew_knows():
+    env = env_for(endurance_s=500.0, decoys=[(300.0, 0.0)])
+    obs, _ = env.reset(seed=0)
+    assert field(obs, "energy_left")[0] == 1.0 and field(obs, "return_cost")[0] == 0.0
+    assert field(obs, "belief_remaining")[0] == pytest.approx(1.0)
+    assert field(obs, "belief").max() == pytest.approx(1.0, abs=0.05)  # the prior's peak block
+    peak = field(obs, "belief_peak_offset").astype(float)
+    metres = peak * PLAN_OFFSET_SCALE_M / (1.0 - np.hypot(*peak))
+    assert np.hypot(*(metres - (550.0, 80.0))) < 45.0  # the most likely cell: the datum's
+    assert not field(obs, "candidate_offset").any() and field(obs, "unresolved_candidates")[0] == 0.0
+    for _, _, info in fly_to(env, (300.0, 0.0), limit=40):
+        pass
+    obs = env.unwrapped.core.obs[0]
+    assert field(obs, "energy_left")[0] == pytest.approx(1.0 - 40 / 500.0)
+    assert field(obs, "return_cost")[0] == pytest.approx(300.0 / 10.0 / 500.0, abs=0.01)
+    assert field(obs, "belief_remaining")[0] < 1.0
+    assert field(obs, "unresolved_candidates")[0] == 0.25 or field(obs, "confirmed")[0] == 0.0
+
+
+def test_confirming_and_reaching_the_victim_pays_100_and_detection_alone_does_not():
+    env = env_for()
+    env.reset(seed=0)
+    steps = list(fly_to(env, (600.0, 100.0), zoom=0.6))
+    reward, terminated, info = steps[-1]
+    assert terminated and info["success"] and info["victim_confirmed"]
+    assert reward == pytest.approx(REWARD_TARGET + REWARD_STEP - 0.01 * (1.0 + 0.6 ** 2), abs=0.05)
+    assert all(not i["success"] for _, _, i in steps[:-1])
+    assert any(i["victim_detected"] and not i["victim_confirmed"] for _, _, i in steps)  # seen before confirmed
+
+
+def test_running_dry_costs_50_and_coming_home_with_reserve_pays_20():
+    dry = env_for(endurance_s=20.0)
+    dry.reset(seed=0)
+    *_, (reward, terminated, info) = fly_to(dry, (400.0, 0.0))
+    assert terminated and info["ran_dry"] and info["steps"] == 20
+    assert reward == pytest.approx(REWARD_RAN_DRY + REWARD_STEP - 0.01 * 2.0, abs=0.05)
+    for endurance, paid in ((1000.0, REWARD_RETURNED), (85.0, 0.0)):  # back after about 78 s
+        env = env_for(endurance_s=endurance)
+        env.reset(seed=0)
+        list(fly_to(env, (150.0, 0.0), limit=60))
+        *_, (reward, terminated, info) = fly_to(env, (0.0, 0.0))
+        left = 1.0 - info["steps"] / endurance
+        assert terminated and info["returned"] and (left >= RETURN_RESERVE) == (paid > 0.0)
+        assert reward == pytest.approx(paid + REWARD_STEP, abs=0.05)
+
+
+def test_the_caps_on_targets_and_obstacles_are_configurable():
+    many = Scenario(area=AREA, targets=tuple(Target("debris", 10.0 * k, 0.0, primary=k == 0) for k in range(20)),
+                    obstacles=tuple(Obstacle(900.0, -400.0 + 50.0 * k, 10.0) for k in range(6)), name="crowded")
+    with pytest.raises(ValueError, match="at most 16 and 4"):
+        SarSearchEnv(SarSearchConfig(scenarios=(many,))).reset(seed=0)
+    env = SarSearchEnv(SarSearchConfig(scenarios=(many,), max_targets=24, max_obstacles=8))
+    env.reset(seed=0)
+    assert env.unwrapped.core.targets.shape[1] == 24 and env.unwrapped.core.scen.obstacles.shape[1] == 8
+    with pytest.raises(ValueError, match="SarSearchConfig.max_obstacles must be an integer in"):
+        SarSearchConfig(max_obstacles=0)
+
+
+def test_vectorised_env_equals_single_envs_step_for_step():
+    config = SarSearchConfig(split="val", flight=FlightSettings(max_steps=80), goal_conditioned=True)
+    n, seeds = 3, [11, 12, 13]
+    vec, singles = SarSearchVectorEnv(n, config), [SarSearchEnv(config) for _ in range(n)]
+    obs = vec.reset(seed=seeds)[0]
+    for env, seed, row in zip(singles, seeds, obs):
+        np.testing.assert_array_equal(env.reset(seed=seed)[0], row)
+    rng = np.random.default_rng(0)
+    for t in range(120):  # through an auto-reset at the step limit
+        if t % 30 == 0:
+            goals = rng.integers(0, 4, size=n)
+            vec.set_goals(goals)
+            for env, goal in zip(singles, goals):
+                env.set_goal(int(goal))
+        actions = rng.uniform([-1, -1, 0, 0], 1.0, size=(n, 4)).astype(np.float32)
+        obs, reward, terminated, truncated, _ = vec.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, tr, _ = env.step(actions[i])
+            if te or tr:
+                o, _ = env.reset()
+            np.testing.assert_array_equal(o, obs[i])
+            assert r == pytest.approx(reward[i]) and (te, tr) == (terminated[i], truncated[i])
