@@ -66,6 +66,15 @@ def with_actions(policy: Policy, act) -> Policy:
     return dataclasses.replace(policy, _act=act)
 
 
+LINK_OR_VEHICLE_ENDS = ("vehicle switched to", "telemetry lost", "vehicle disarmed", "policy stalled", "low battery")
+
+
+def searched_to_its_own_end(report: dict) -> bool:
+    """The search ended by its own logic (victim, step limit, back home...), not because of the link or the vehicle:
+    which of those depends on the policy, so tests of the flight side do not name it."""
+    return report["search_end"] is not None and not report["search_end"].startswith(LINK_OR_VEHICLE_ENDS)
+
+
 def read_tlog(path: Path) -> list:
     """Every message of a tlog, with ``_timestamp`` in seconds (the runner's clock)."""
     log = mavutil.mavlink_connection(str(path), dialect="common")
