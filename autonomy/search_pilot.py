@@ -9,8 +9,10 @@ candidates, confirmation rule, endurance) and the same observation builder:
    modelled altitude, drift, the belief, sightings by the simulated camera (the mission's objects and the detection
    model, with draws keyed by the mission seed), close looks and their identifications, end conditions;
 2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
-3. act on the observation: movement north/east in [-1, 1] scaled to the mission's speed limit, search
-   intensity and camera zoom in [0, 1]; during a close look, :attr:`Decision.altitude_m` asks the runner for the
+3. act on the observation: movement in [-1, 1] scaled to the mission's speed limit (north/east, or towards and to
+   the right of the observation's target when the artifact was trained so: its ``action_frame``), search
+   intensity and camera zoom in [0, 1], the velocity passed through the environment's safety shield (danger zones,
+   geofence: ``missions.shield``); during a close look, :attr:`Decision.altitude_m` asks the runner for the
    close-look altitude (the search state's ``altitude_target``), which it flies with vertical velocity.
 
 The camera is simulated in every mode, also against a real autopilot: a real payload would feed its
@@ -26,10 +28,11 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
-from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState
+from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, target_frame_to_north_east
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
 from missions.search import ScenarioBatch
+from missions.shield import shield_velocity
 
 END_REASONS = ("victim reached", "return to base", "returned home", "endurance exhausted", "step limit",
                "entered a danger zone", "left the geofence")
@@ -69,6 +72,10 @@ class SearchPilot:
         self.mission, self.policy = mission, policy
         self.flight = mission.flight
         self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
+        # how the artifact's movement is read: north / east, or towards / right of the observation's target
+        manifest = getattr(policy, "manifest", None)
+        self.action_frame = (manifest.training_config.get("action_frame", "north_east") if manifest is not None
+                             else getattr(policy, "action_frame", "north_east"))
         # padded to the training environment's slots: the detection draws are keyed by slot
         scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence],
                                             num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))
@@ -112,7 +119,15 @@ class SearchPilot:
         finite = bool(np.all(np.isfinite(action)))
         if finite:
             self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
-        movement = np.clip(action[:2], -1.0, 1.0) * self.flight.max_speed_mps if finite else np.array([np.nan] * 2)
+        movement = np.clip(action[:2], -1.0, 1.0) if finite else np.array([np.nan] * 2)
+        if finite and self.action_frame == "target":  # as the training environment read it (its action_frame)
+            movement = target_frame_to_north_east(movement[None], state.position,
+                                                  state.target_position(self.policy.hierarchical))[0]
+        movement = movement * self.flight.max_speed_mps
+        if finite:  # the environment's safety filter: danger zones and geofence (missions.shield)
+            scen = state.scen
+            movement = shield_velocity(state.position, movement[None], scen.obstacles, scen.obstacle_valid,
+                                       scen.fence)[0]
         target = float(state.altitude_target[0])
         return Decision(self.step, (float(movement[0]), float(movement[1])), float(self.intensity[0]),
                         float(self.zoom[0]), int(state.goal[0]), tuple(state.goal_point[0].tolist()), new_goal,

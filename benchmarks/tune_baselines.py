@@ -20,8 +20,8 @@ from policies.baselines import ScriptedSettings
 from common import results_file, write_report
 
 KNOBS = {
-    "coverage_factor": (0.6, 0.8, 1.0, 1.3, 1.7),
-    "bound_sigmas": (1.5, 2.0, 2.5, 3.0, 4.0),
+    "coverage_factor": (0.6, 0.8, 1.0, 1.3, 1.7, 2.2, 3.0),
+    "bound_sigmas": (1.0, 1.5, 2.0, 2.5, 3.0, 4.0),
     "travel_time_s": (5.0, 15.0, 30.0, 60.0, 150.0, 400.0),
     "investigate_plausibility": (0.0, 0.02, 0.1, 0.3),
     "close_look_zoom": (0.0, 0.3, 0.5, 0.8, 1.0),

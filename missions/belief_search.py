@@ -64,6 +64,17 @@ IDENTIFY_STREAM = np.uint64(0x1D5EED)
 """Mixed into the episode seed for the identification draws: a stream of their own beside the detections'."""
 
 
+def target_frame_to_north_east(movement: np.ndarray, position: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(N, 2) movement commands given towards the target point and to the right of the line to it (SarSearch-v1's
+    ``action_frame`` "target"), as north and east components. At the target itself (closer than 1 cm) towards is
+    north."""
+    offset = target - position
+    distance = np.hypot(*offset.T)
+    towards = np.where((distance > 0.01)[:, None], offset / np.maximum(distance, 0.01)[:, None], (1.0, 0.0))
+    right = np.stack([-towards[:, 1], towards[:, 0]], axis=1)  # facing north, the right hand points east
+    return movement[:, 0:1] * towards + movement[:, 1:2] * right
+
+
 @dataclass
 class BeliefStepOutcome:
     """What one :meth:`BeliefSearchState.advance` found, per search (N,) arrays; views valid until the next step."""

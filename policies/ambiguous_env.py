@@ -2,11 +2,17 @@
 
 The same frame as SarSearch-v0 (:class:`policies.env_core.FlownSearch`: scenario pool, exact multirotor dynamics,
 observations), on the search state of ``missions.belief_search`` that the mission runner's pilot flies too. One
-step: the action (movement north/east in [-1, 1], search intensity and zoom in [0, 1]) is flown for one period;
+step: the action (movement in [-1, 1], north/east or towards / right of the target (``action_frame``), search
+intensity and zoom in [0, 1]) becomes a velocity command, passes the safety shield (``missions.shield``: danger
+zones and geofence, as the pilot applies it in flight) and is flown for one period;
 the search state advances (the camera's altitude, drift, sightings, candidates, close looks, the belief); the
-reward is the paper's table with the task's two new ends:
+reward is the paper's table without its time and energy costs, which the endurance replaces, and with the task's
+two new ends:
 
-* -0.1 per step, -0.01 ||a||^2;
+* no cost per step and none for the action (the paper's -0.1 and -0.01 ||a||^2): time and energy are the
+  endurance now, and a running cost made giving up the best policy as soon as success looked unlikely, since
+  coming home ends the episode (measured: in a meta-only phase on SarSearch-v1 with them, HRL-SAC's val success
+  fell from 29.5 % to 2.5 % while its training return rose from -68 to -55; docs/results/README.md);
 * +100 when the drone is within the reach radius of the victim once a close look has confirmed it;
 * -50 inside a danger zone, -10 outside the geofence;
 * -50 when the endurance runs out away from home (``ran_dry``: the drone is lost);
@@ -21,8 +27,7 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V4
 from missions.belief_search import CONFIRMED, BeliefSearchState
-from policies.env_core import (ENERGY_COMPONENTS, REWARD_BOUNDARY, REWARD_COLLISION, REWARD_ENERGY, REWARD_STEP,
-                               REWARD_TARGET, FlownSearch, SarSearchConfig)
+from policies.env_core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_TARGET, FlownSearch, SarSearchConfig
 
 REWARD_RAN_DRY = -50.0
 REWARD_RETURNED = 20.0
@@ -34,6 +39,8 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
     """SarSearch-v1: N independent searches stepped together; see the module docstring."""
 
     layout = LAYOUT_V4
+    shielded = True
+    step_reward = 0.0
 
     def __init__(self, config: SarSearchConfig, num_envs: int):
         BeliefSearchState.__init__(self, self._placeholder(config, num_envs), config.flight)
@@ -48,10 +55,8 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
         energy_before = self.energy_left.copy()
         a, position = self.fly(actions)
         out = self.advance(position, a[:, 2], a[:, 3], flight.step_period_s)
-        energy = a[:, ENERGY_COMPONENTS]
         with_reserve = out.returned & (energy_before >= RETURN_RESERVE)
-        reward = (REWARD_STEP + REWARD_ENERGY * np.einsum("ij,ij->i", energy, energy) + REWARD_TARGET * out.success
-                  + REWARD_COLLISION * out.collision + REWARD_BOUNDARY * out.out_of_bounds
+        reward = (REWARD_TARGET * out.success + REWARD_COLLISION * out.collision + REWARD_BOUNDARY * out.out_of_bounds
                   + REWARD_RAN_DRY * out.ran_dry + REWARD_RETURNED * with_reserve)
         self.episode_return += reward
         terminated = out.success | out.collision | out.out_of_bounds | out.ran_dry | out.returned

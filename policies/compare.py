@@ -25,7 +25,8 @@ from typing import TextIO
 
 import numpy as np
 
-from policies.evaluation_stats import wilson_interval
+from policies.evaluation_stats import (group_stats, intervals_overlap, pooled_stats, t_interval,  # noqa: F401
+                                       t_quantile_975, wilson_interval)
 
 ALGO_LABELS = {"hrl-sac": "HRL-SAC", "sac": "flat SAC"}
 BASELINE_LABELS = {"random": "Random", "expanding_square": "Expanding square", "parallel_track": "Parallel track"}
@@ -37,96 +38,8 @@ REQUIRED_METRICS = ("episodes", "success_rate", "reward_mean", "reward_std", "co
                     "length_mean", "length_std")
 DEFAULT_EPISODES = 100
 
-# Two-sided 95 % Student-t quantiles t(0.975, dof); between the tabled dof, interpolated linearly in 1/dof.
-_T975 = {1: 12.706205, 2: 4.302653, 3: 3.182446, 4: 2.776445, 5: 2.570582, 6: 2.446912, 7: 2.364624,
-         8: 2.306004, 9: 2.262157, 10: 2.228139, 11: 2.200985, 12: 2.178813, 13: 2.160369, 14: 2.144787,
-         15: 2.131450, 16: 2.119905, 17: 2.109816, 18: 2.100922, 19: 2.093024, 20: 2.085963, 21: 2.079614,
-         22: 2.073873, 23: 2.068658, 24: 2.063899, 25: 2.059539, 26: 2.055529, 27: 2.051831, 28: 2.048407,
-         29: 2.045230, 30: 2.042272, 40: 2.021075, 60: 2.000298, 120: 1.979930}
-_Z975 = 1.959963984540054
-
-
 class CompareError(ValueError):
     """A problem with the inputs of a comparison; its message is one line meant for the user."""
-
-
-# ---------------------------------------------------------------------------------------------- statistics
-def t_quantile_975(dof: int) -> float:
-    """The 0.975 quantile of Student's t with ``dof`` degrees of freedom (the 95 % two-sided critical value)."""
-    if dof < 1:
-        raise ValueError(f"dof must be >= 1, got {dof}")
-    if dof in _T975:
-        return _T975[dof]
-    tabled = sorted(_T975)
-    lower = max(d for d in tabled if d < dof)
-    upper = min((d for d in tabled if d > dof), default=None)
-    t_upper, inv_upper = (_Z975, 0.0) if upper is None else (_T975[upper], 1.0 / upper)
-    share = (1.0 / lower - 1.0 / dof) / (1.0 / lower - inv_upper)
-    return _T975[lower] + share * (t_upper - _T975[lower])
-
-
-def t_interval(values) -> tuple[float, float | None, tuple[float, float] | None]:
-    """Mean, sample standard deviation and 95 % t-interval of the mean (None for fewer than 2 values)."""
-    values = np.asarray(values, dtype=np.float64)
-    mean = float(values.mean())
-    if len(values) < 2:
-        return mean, None, None
-    std = float(values.std(ddof=1))
-    half = t_quantile_975(len(values) - 1) * std / math.sqrt(len(values))
-    return mean, std, (mean - half, mean + half)
-
-
-def intervals_overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
-    return a[0] <= b[1] and b[0] <= a[1]
-
-
-def _pooled_mean_std(metrics: list[dict], name: str) -> tuple[float, float]:
-    """Mean and (population) standard deviation over all episodes, from per-run means and standard deviations."""
-    n = np.array([m["episodes"] for m in metrics], dtype=np.float64)
-    means = np.array([m[f"{name}_mean"] for m in metrics], dtype=np.float64)
-    stds = np.array([m[f"{name}_std"] for m in metrics], dtype=np.float64)
-    mean = float((n * means).sum() / n.sum())
-    return mean, float(math.sqrt((n * (stds ** 2 + (means - mean) ** 2)).sum() / n.sum()))
-
-
-def _median(values) -> float | None:
-    return float(np.median(values)) if len(values) else None
-
-
-def pooled_stats(metrics: list[dict]) -> dict:
-    """Statistics over all episodes of one or more evaluations (seeds of one method, or one baseline)."""
-    episodes = sum(int(m["episodes"]) for m in metrics)
-    successes = sum(int(round(m["success_rate"] * m["episodes"])) for m in metrics)
-    per_episode = [m.get("per_episode") for m in metrics]
-    stats = {"episodes": episodes, "successes": successes, "success": successes / episodes,
-             "wilson95": list(wilson_interval(successes, episodes))}
-    for name in ("reward", "coverage", "length"):
-        stats[f"{name}_mean"], stats[f"{name}_std"] = _pooled_mean_std(metrics, name)
-    weights = np.array([m["episodes"] for m in metrics], dtype=np.float64) / episodes
-    for name in ("collision_rate", "out_of_bounds_rate", "detection_rate"):
-        values = [m.get(name) for m in metrics]
-        stats[name] = None if None in values else float(np.dot(weights, values))
-    reach = [m["subgoal_reachability"] for m in metrics if m.get("subgoal_reachability") is not None]
-    stats["subgoal_reachability"] = float(np.mean(reach)) if reach else None
-    if all(p is not None for p in per_episode):
-        first = np.concatenate([np.asarray(p["first_detection"], dtype=np.float64) for p in per_episode])
-        success = np.concatenate([np.asarray(p["success"], dtype=bool) for p in per_episode])
-        length = np.concatenate([np.asarray(p["length"], dtype=np.float64) for p in per_episode])
-        stats["median_time_to_detection"] = _median(first[first >= 0])
-        stats["median_steps_to_success"] = _median(length[success])
-    else:
-        stats["median_time_to_detection"] = stats["median_steps_to_success"] = None
-    return stats
-
-
-def group_stats(metrics: list[dict]) -> dict:
-    """:func:`pooled_stats` plus the across-seed statistics of the success rate."""
-    rates = [float(m["success_rate"]) for m in metrics]
-    mean, std, interval = t_interval(rates)
-    if interval is not None:
-        interval = (max(0.0, interval[0]), min(1.0, interval[1]))
-    return {"seeds": len(metrics), "seed_success": rates, "success_mean": mean, "success_std": std,
-            "success_t95": list(interval) if interval else None, **pooled_stats(metrics)}
 
 
 # ---------------------------------------------------------------------------------------------- loading

@@ -21,7 +21,8 @@ import numpy as np
 
 from missions.goals import GOAL_NAMES
 from policies.aggregate import STRATA, aggregate, strata_of
-from policies.compare import CompareError, Run, group_stats, intervals_overlap
+from policies.compare import CompareError, Run
+from policies.evaluation_stats import group_stats, intervals_overlap
 from policies.evaluation import FOUND_BY_S, episode_batch
 
 SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bounded, repeated)",

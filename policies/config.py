@@ -66,6 +66,10 @@ class TrainConfig:
     come from ``flight``)."""
     flight: FlightSettings = field(default_factory=FlightSettings)
     """Altitude, speed, decision period, K (subgoal_interval), step limit and reach radius."""
+    action_frame: str = "north_east"
+    """How the policy's movement is read (``SarSearchConfig.action_frame``): "north_east" (the paper's) or "target"
+    (SarSearch-v1: towards the observation's target point and to its right; the exported artifact's manifest
+    carries it and the flight pilot reads it the same way)."""
 
     # --- low-level / flat SAC
     actor: NetworkConfig = field(default_factory=NetworkConfig)
@@ -290,6 +294,10 @@ class TrainConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"
+                                                                 and self.task != "SarSearch-v1"):
+            raise ValueError(f"TrainConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "
+                             f"{self.action_frame!r} on {self.task}")
         if self.meta_joint_goals not in ("learned", "random"):
             raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', got {self.meta_joint_goals!r}")
         if self.meta_joint_goals == "random" and self.meta_only_steps <= 0 and self.algo == "hrl-sac":

@@ -28,7 +28,8 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V3, observe_search
 from missions import search
-from missions.belief_search import TARGET_SLOTS
+from missions.belief_search import TARGET_SLOTS, target_frame_to_north_east
+from missions.shield import shield_velocity
 from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
@@ -90,6 +91,10 @@ class SarSearchConfig:
     """Target slots per scenario (a scenario with more is refused); None = the task's (TASK_MAX_TARGETS)."""
     max_obstacles: int = 4
     """Danger-zone slots per scenario (a scenario with more is refused)."""
+    action_frame: str = "north_east"
+    """How the movement components are read: "north_east" (velocity north and east, the paper's) or "target"
+    (SarSearch-v1 only: towards the observation's target point and to the right of that line, so flying straight
+    at the target is the constant action (1, 0); ``missions.belief_search.target_frame_to_north_east``)."""
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -100,6 +105,10 @@ class SarSearchConfig:
                      integers=("pool_size", "max_obstacles"))
         if self.max_targets is not None:
             check_fields(self, (("max_targets", 1, 256),), integers=("max_targets",))
+        if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"
+                                                                 and self.task != "SarSearch-v1"):
+            raise ValueError(f"SarSearchConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "
+                             f"{self.action_frame!r} on {self.task}")
 
     @property
     def target_slots(self) -> int:
@@ -150,6 +159,10 @@ class FlownSearch:
     search state (``missions.search_state.SearchState`` or ``missions.belief_search.BeliefSearchState``)."""
 
     config: SarSearchConfig
+    shielded = False
+    """Whether velocity commands pass ``missions.shield`` before they are flown (SarSearch-v1)."""
+    step_reward = REWARD_STEP
+    """The reward's constant per-step part (the paper's -0.1; SarSearch-v1 has none): the shaping leaves it out."""
 
     def _placeholder(self, config: SarSearchConfig, num_envs: int) -> search.ScenarioBatch:
         """Set up the scenario source; returns the padded scenario arrays the search state starts from."""
@@ -216,8 +229,16 @@ class FlownSearch:
         a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.n, 4), ACTION_LOW, ACTION_HIGH)
         self.last_action[:] = a
         previous = self.position.copy()
-        v = dynamics.step_batch(self.vehicles, a[:, 0] * flight.max_speed_mps, a[:, 1] * flight.max_speed_mps,
-                                0.0, self.airframe, self.wind, self.time_s, flight.step_period_s, out=self.vehicles)
+        movement = a[:, 0:2]
+        if self.config.action_frame == "target":  # SarSearch-v1's option: movement towards / right of the target
+            movement = target_frame_to_north_east(movement, self.position,
+                                                  self.target_position(self.config.goal_conditioned))
+        velocity = movement * flight.max_speed_mps
+        if self.shielded:  # SarSearch-v1: the safety filter the flight pilot applies too
+            velocity = shield_velocity(self.position, velocity, self.scen.obstacles, self.scen.obstacle_valid,
+                                       self.scen.fence)
+        v = dynamics.step_batch(self.vehicles, velocity[:, 0], velocity[:, 1], 0.0, self.airframe, self.wind,
+                                self.time_s, flight.step_period_s, out=self.vehicles)
         position = np.stack([v.north_m, v.east_m], axis=1)
         self.path_length_m += np.hypot(position[:, 0] - previous[:, 0], position[:, 1] - previous[:, 1])
         return a, position

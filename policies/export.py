@@ -51,6 +51,12 @@ ACTION_UNITS = (
     f"sensor effort, 1 = full: detection probability scales with it, coverage counts from {SENSOR_ON_INTENSITY}",
     f"zoom, 1 = full: camera footprint half-width = altitude * tan(FOV / 2) / (1 + {ZOOM_RANGE:g} * zoom)",
 )
+TARGET_FRAME_NAMES = ("movement_towards_target", "movement_right_of_target") + ACTION_NAMES[2:]
+TARGET_FRAME_UNITS = (
+    "fraction of flight.max_speed_mps towards the observation's target point (target_offset's direction)",
+    "fraction of flight.max_speed_mps to the right of the line to the target (90 degrees clockwise from it)",
+) + ACTION_UNITS[2:]
+"""The action spec of a policy trained with ``action_frame`` "target" (SarSearch-v1)."""
 ENTRY_POINTS = {
     "act": f"obs float32 [N, {OBS_DIM}] raw (observation layout) -> actions float32 [N, 4] within action low/high",
     "select_goal": f"obs float32 [N, {META_OBS_DIM}] raw (the first {META_OBS_DIM} values) -> goal indices int64 "
@@ -145,12 +151,14 @@ def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
                    evaluation: dict | str = NOT_EVALUATED) -> PolicyManifest:
     """The manifest of ``policy`` exported in format ``fmt``."""
     config = policy.config
+    names, units = ((TARGET_FRAME_NAMES, TARGET_FRAME_UNITS) if config.action_frame == "target"
+                    else (ACTION_NAMES, ACTION_UNITS))
     return PolicyManifest(
         format_version=FORMAT_VERSION, format=fmt, algorithm=config.algo,
         subgoal_interval=config.flight.subgoal_interval if policy.hierarchical else None,
         goals=goal_specs() if policy.hierarchical else (),
         observation=ObservationSpec.current(),
-        action=ActionSpec(ACTION_NAMES, tuple(ACTION_LOW.tolist()), tuple(ACTION_HIGH.tolist()), ACTION_UNITS),
+        action=ActionSpec(names, tuple(ACTION_LOW.tolist()), tuple(ACTION_HIGH.tolist()), units),
         # Through JSON once, so that the manifest in memory equals the one read back (lists, not tuples).
         entry_points=ENTRY_POINTS, training_config=json.loads(json.dumps(config.to_dict())), evaluation=evaluation,
         source_checkpoint=SourceCheckpoint(policy.path.name, checkpoint_sha256, policy.step),

@@ -55,7 +55,7 @@ def record_observations(policy: CheckpointPolicy, count: int = PARITY_OBSERVATIO
                         seed: int = 0) -> np.ndarray:
     """(count, 288) float32 observations met by flying ``policy`` (and random actions) on the val split."""
     core = episode_batch("val", envs, policy.config.flight, goal_conditioned=policy.hierarchical,
-                         task=policy.config.task)
+                         task=policy.config.task, action_frame=policy.config.action_frame)
     rng = np.random.default_rng(seed)
     random_slots = np.arange(envs) % 2 == 1
     k, next_episode, recorded = policy.config.flight.subgoal_interval, envs, []

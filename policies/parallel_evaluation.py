@@ -71,7 +71,8 @@ def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
     policy = CheckpointPolicy.from_state(chunk.policy_state, Path(chunk.checkpoint))
     return fly_policy(policy, episode_batch(chunk.split, chunk.episodes, policy.config.flight,
                                             goal_conditioned=policy.hierarchical, slots=chunk.slots,
-                                            task=policy.config.task, **chunk.environment), chunk.constant_goal)
+                                            task=policy.config.task, action_frame=policy.config.action_frame,
+                                            **chunk.environment), chunk.constant_goal)
 
 
 def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None) -> dict[str, np.ndarray]:

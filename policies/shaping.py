@@ -18,7 +18,7 @@ import numpy as np
 
 from missions import search
 from policies.config import TrainConfig
-from policies.env_core import CAMERA_ZOOM, REWARD_STEP, SEARCH_INTENSITY
+from policies.env_core import CAMERA_ZOOM, SEARCH_INTENSITY
 
 
 def cross_track_m(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -38,6 +38,8 @@ class StepStart:
     target: np.ndarray
     searched_cells: np.ndarray
     cell_area_m2: np.ndarray
+    step_reward: float
+    """The environment reward's constant per-step part, left out of the learning reward."""
 
 
 def before_step(core, hrl: bool) -> StepStart:
@@ -45,7 +47,7 @@ def before_step(core, hrl: bool) -> StepStart:
     area = core.scen.area
     target = core.goal_point if hrl else core.target_position(False)
     return StepStart(core.position.copy(), target.copy(), np.array(core.searched_cells, dtype=np.float64),
-                     (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size)
+                     (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size, core.step_reward)
 
 
 def shaped_reward(config: TrainConfig, hrl: bool, start: StepStart, actions: np.ndarray, info: dict,
@@ -64,8 +66,9 @@ def shaped_reward(config: TrainConfig, hrl: bool, start: StepStart, actions: np.
         # The bonus pays for completing g (info["goal_completed"]), not for being within reach of it: over an
         # unsearched cell with the sensor off the goal stays put, and a bonus for arriving paid every step of
         # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
-        return out + cfg.intrinsic_goal_bonus * info["goal_completed"] + cfg.extrinsic_weight * (reward - REWARD_STEP)
-    return out + (reward - REWARD_STEP)
+        return (out + cfg.intrinsic_goal_bonus * info["goal_completed"]
+                + cfg.extrinsic_weight * (reward - start.step_reward))
+    return out + (reward - start.step_reward)
 
 
 def searched_cells(config: TrainConfig, start: StepStart, actions: np.ndarray, info: dict) -> np.ndarray:

@@ -75,8 +75,9 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
         scenarios = tuple(load_mission(path).scenario for path in cfg.missions)
-        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(task=cfg.task, split=cfg.split, scenarios=scenarios,
-                                                                    flight=cfg.flight, goal_conditioned=self.hrl))
+        self.env = SarSearchVectorEnv(cfg.num_envs, SarSearchConfig(
+            task=cfg.task, split=cfg.split, scenarios=scenarios, flight=cfg.flight, goal_conditioned=self.hrl,
+            action_frame=cfg.action_frame))
         self.rng = np.random.default_rng(cfg.seed)
         self.obs_dim, self.meta_dim = cfg.layout.dim, cfg.layout.meta_dim
         self.normalizer = RunningMeanStd((self.obs_dim,))
@@ -301,7 +302,7 @@ class Trainer:
         cfg = self.config
         policy = CheckpointPolicy(cfg, self.normalizer, self.low, self.meta, self.step, self.run_dir)
         record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=self.hrl,
-                                                  task=cfg.task))
+                                                  task=cfg.task, action_frame=cfg.action_frame))
         success = float(record["success"].mean())
         self.metrics["eval_success_rate"] = success
         if cfg.meta_keep_best and self.low_level_frozen and (self.best_meta is None

@@ -190,8 +190,9 @@ class ScriptedArtifact:
 
     hierarchical, subgoal_interval = True, 30
 
-    def __init__(self):
+    def __init__(self, action_frame: str = "north_east"):
         self.seen: list[np.ndarray] = []
+        self.action_frame = action_frame  # what an artifact's manifest carries in its training_config
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         return np.full(meta_obs.shape[:-1], TRACK_OBJECT)
@@ -199,10 +200,13 @@ class ScriptedArtifact:
     def act(self, obs: np.ndarray) -> np.ndarray:
         self.seen.append(np.array(obs))
         offset = obs[..., 2:4]
-        return np.concatenate([offset / max(float(np.hypot(*offset)), 0.5), [1.0, 0.3]]).astype(np.float32)
+        speed = min(1.0, float(np.hypot(*offset)) / 0.5)
+        movement = [speed, 0.0] if self.action_frame == "target" else offset / max(float(np.hypot(*offset)), 0.5)
+        return np.concatenate([movement, [1.0, 0.3]]).astype(np.float32)
 
 
-def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight():
+@pytest.mark.parametrize("action_frame", ["north_east", "target"])
+def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_frame):
     from autonomy.search_pilot import SearchPilot
     from missions.mission import Mission
     from policies.env_core import SarSearchConfig, make_batch
@@ -210,10 +214,11 @@ def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight():
     scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=700.0,
                         targets=(Target("person", 330.0, 80.0, primary=True), Target("person", 250.0, 20.0),
                                  Target("boat", 280.0, -60.0)), name="shared")
-    env = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [7])
-    artifact = ScriptedArtifact()
+    env = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True, action_frame=action_frame), [7])
+    artifact = ScriptedArtifact(action_frame)
     pilot = SearchPilot(Mission(scenario=scenario), artifact, seed=7)
-    env_end = pilot_end = None
+    env_end = pilot_end = previous = None
+    straight_legs = 0
     for step in range(400):
         decision = pilot.decide(env.position[0].copy())
         if step % 30 == 0 and env_end is None:
@@ -224,7 +229,16 @@ def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight():
             break
         if decision.altitude_m is not None:  # a close look: the runner is asked for the close-look altitude
             assert decision.altitude_m == CLOSE_LOOK_ALTITUDE_M and env.close_look()[0]
+        before = env.position[0].copy()
         _, _, terminated, _, info = env.step(np.array([decision.action]))
+        # on a straight leg the environment flies the pilot's velocity command's direction
+        command, flown = np.array(decision.velocity_ne), env.position[0] - before
+        if previous is not None and np.hypot(*command) > 5.0 and np.hypot(*flown) > 5.0:
+            turn = np.dot(command, previous) / (np.hypot(*command) * np.hypot(*previous))
+            if turn > 0.999:
+                straight_legs += 1
+                assert np.dot(command, flown) / (np.hypot(*command) * np.hypot(*flown)) > 0.99  # within 8 degrees
+        previous = command
         if terminated[0]:
             env_end = "victim reached" if info["success"][0] else "another end"
-    assert env_end == pilot_end == "victim reached"
+    assert env_end == pilot_end == "victim reached" and straight_legs > 10

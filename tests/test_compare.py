@@ -224,3 +224,42 @@ def test_errors_are_one_line_with_exit_code_2(runs, tmp_path, capsys):
     err = _one_line_error(capsys, [str(runs[("sac", 1)][0]), "--evaluate", "--out", out])
     assert "cannot evaluate" in err and "no checkpoint" in err
     assert not Path(out).exists()
+
+
+def test_v1_rows_scripted_streams_constant_goals_iqm_and_verdicts(tmp_path):
+    """SarSearch-v1 runs get the scripted searchers over detection streams, the constant-goal rows read from the
+    runs' eval files, an IQM over runs x condition strata (recomputed here with scipy's trimmed mean) and the
+    verdicts of HRL-SAC against every row."""
+    scipy_stats = pytest.importorskip("scipy.stats")
+    from missions.generator import TASK_V1, generate_scenario, scenario_seeds
+
+    paths = []
+    for seed, successes in enumerate((6, 7, 8)):
+        run, _ = make_run(tmp_path, f"hrl-{seed}", "hrl-sac", seed, successes, task="SarSearch-v1")
+        goal_metrics = json.loads((run / "eval_test.json").read_text())
+        goal_metrics.update(summarise(episode_record(2, seed + 10, True)))
+        (run / "eval_test_goal-TrackObject.json").write_text(json.dumps(goal_metrics))
+        paths.append(run)
+    paths += [make_run(tmp_path, f"sac-{seed}", "sac", seed, 1, task="SarSearch-v1")[0] for seed in range(3)]
+    summary = compare(paths, tmp_path / "report", split="test", progress=None, streams=2)
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "## SarSearch-v1: every method on the same scenarios" in report
+    scripted = {row["baseline"]: row for row in summary["baselines"]}
+    assert set(scripted) == {"random", "expanding_square", "parallel_track", "greedy_bayes"}
+    assert all(row["seeds"] == 2 and row["episodes"] == 2 * EPISODES for row in scripted.values())
+    assert [row["label"] for row in summary["constant_goals"]] == ["HRL-SAC's low level, always TrackObject"]
+    assert summary["constant_goals"][0]["success_mean"] == pytest.approx(0.2)
+    # the IQM of HRL-SAC's row: 3 runs x the strata of these 10 scenarios, trimmed by a quarter each side
+    scenarios = [generate_scenario(s, TASK_V1) for s in scenario_seeds("test", EPISODES)]
+    strata = np.array([int(s.conditions.time_of_day) * 3 + int(s.conditions.sea) for s in scenarios])
+    runs = [np.arange(EPISODES) < k for k in (6, 7, 8)]
+    scores = np.array([[run[strata == k].mean() for k in sorted(set(strata))] for run in runs])
+    hrl = next(row for row in summary["groups"] if row["algo"] == "hrl-sac")
+    if scores.size % 4 == 0:  # scipy's trimmed mean drops whole scores: equal where a quarter is a whole number
+        assert hrl["aggregate"]["iqm"] == pytest.approx(scipy_stats.trim_mean(scores.ravel(), 0.25))
+    low, high = hrl["aggregate"]["iqm_ci95"]
+    assert 0.0 <= low <= hrl["aggregate"]["iqm"] <= high <= 1.0
+    verdicts = {v["against"]: v for v in summary["task_verdicts"]}
+    assert verdicts["Random"]["above_non_overlapping_seeds"]  # 70 % against 0 %
+    assert set(verdicts) >= {"flat SAC (default)", "HRL-SAC's low level, always TrackObject", "Greedy Bayesian"}
+    assert (tmp_path / "report" / "found_by.png").exists()

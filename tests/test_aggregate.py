@@ -1,0 +1,35 @@
+"""rliable-style aggregates (``policies.aggregate``): the interquartile mean and its stratified bootstrap interval."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from policies.aggregate import aggregate, interquartile_mean, score_matrix, stratified_bootstrap_ci
+
+
+def test_interquartile_mean_is_the_trimmed_mean_with_fractional_cut_offs():
+    # 10 scores: the quarter cut off each side is 2.5 scores, so 2 and 7 count half: (1 + 3 + 4 + 5 + 6 + 3.5) / 5
+    assert interquartile_mean(np.arange(10)) == pytest.approx(4.5)
+    assert interquartile_mean([0.0, 1.0, 1.0, 100.0]) == pytest.approx(1.0)  # an outlying run does not move it
+    scipy_stats = pytest.importorskip("scipy.stats")
+    scores = np.random.default_rng(3).uniform(size=(5, 12))  # 60 scores: the cut-offs are whole
+    assert interquartile_mean(scores) == pytest.approx(scipy_stats.trim_mean(scores.ravel(), 0.25))
+
+
+def test_stratified_bootstrap_resamples_runs_within_tasks_and_is_reproducible():
+    same = np.tile([[0.2, 0.5, 0.9]], (5, 1))  # every run scores alike in each task: nothing to resample
+    assert stratified_bootstrap_ci(same) == pytest.approx((interquartile_mean(same),) * 2)
+    spread = np.random.default_rng(0).uniform(size=(5, 12))
+    low, high = stratified_bootstrap_ci(spread)
+    assert low < interquartile_mean(spread) < high
+    assert (low, high) == stratified_bootstrap_ci(spread)  # seeded
+    wider = stratified_bootstrap_ci(spread[:2])  # fewer runs, a wider interval
+    assert wider[1] - wider[0] > high - low
+
+
+def test_score_matrix_and_aggregate_from_per_episode_successes():
+    strata = np.array([0, 0, 1, 1, 1, 3])  # stratum 2 has no episode: left out
+    runs = [np.array([1, 0, 1, 1, 0, 1]), np.array([0, 0, 1, 0, 0, 1])]
+    np.testing.assert_allclose(score_matrix(runs, strata, 4), [[0.5, 2 / 3, 1.0], [0.0, 1 / 3, 1.0]])
+    result = aggregate(runs, strata, 4)
+    assert (result["runs"], result["tasks"]) == (2, 3) and result["mean"] == pytest.approx(3.5 / 6)
