@@ -1,4 +1,6 @@
-"""What limits a trained run's test success: its deterministic policy against variants of how it acts.
+"""What limits a trained run's test success: its deterministic policy against variants of how it acts (written for
+SarSearch-v0 runs: its scripted variants fly north/east and some read v0's coverage field; for SarSearch-v1 runs see
+benchmarks/low_level_check.py).
 
 Variants, on the same first --episodes scenarios of the split (scenario i with episode seed i):
   * deterministic: the evaluation's policy (tanh of the mean, both levels);
@@ -35,10 +37,11 @@ import sys
 import numpy as np
 import torch
 
-from autonomy.observation import FIELDS_BY_NAME
+from autonomy.observation import LAYOUT_V3
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
-from policies.baselines import ZOOM as SCRIPTED_ZOOM, fly_straight
+from policies.baselines import fly_straight
+from policies.baselines_v0 import ZOOM as SCRIPTED_ZOOM
 from policies.checkpoint_policy import CheckpointPolicy
 from policies.env_core import CAMERA_ZOOM, SEARCH_INTENSITY
 from policies.evaluation import episode_batch, run_episodes, summarise
@@ -47,7 +50,7 @@ from policies.parallel_evaluation import padded
 from common import results_file, write_report
 
 MOVEMENT = slice(0, 2)  # the action's movement components (docs/environment.md)
-COVERAGE = FIELDS_BY_NAME["coverage"].slice
+COVERAGE = LAYOUT_V3.by_name["coverage"].slice  # SarSearch-v0's map
 
 
 def main() -> int:
@@ -95,7 +98,7 @@ def main() -> int:
         return actions
 
     def scripted_low_level(core) -> np.ndarray:
-        return fly_straight(core.position, core.goal_point, core.flight)  # the scripted baselines' steering
+        return fly_straight(core.position, core.goal_point, core.flight, SCRIPTED_ZOOM)  # the scripted steering
 
     def coverage_unseen(core) -> np.ndarray:
         return coverage_unseen_action(core.obs)
@@ -119,7 +122,8 @@ def main() -> int:
         variants["coverage_unseen"] = (coverage_unseen, goals(False))
     results, seen_actions, seen_goals, lengths = {}, [], [], None
     for name, (act, choose_goals) in variants.items():
-        core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical)
+        core = episode_batch(args.split, args.episodes, policy.config.flight, goal_conditioned=policy.hierarchical,
+                             task=policy.config.task, action_frame=policy.config.action_frame)
         record = name == "deterministic"  # what the evaluation's policy does: actions and goals, recorded
 
         def act_on(batch, act=act, record=record):

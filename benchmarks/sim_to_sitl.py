@@ -44,15 +44,20 @@ def main() -> int:
     args = parser.parse_args()
     torch.set_num_threads(1)
     policy = load_policy(args.policy)
-    flight = FlightSettings(**policy.manifest.training_config["flight"])
+    trained = policy.manifest.training_config
+    flight = FlightSettings(**trained["flight"])
+    # the environment the artifact was trained in (SarSearch-v1, its action frame)
+    environment = {"task": trained.get("task", "SarSearch-v1"), "action_frame": trained.get("action_frame", "north_east")}
     choose_goals = (lambda meta_obs: policy.select_goal(meta_obs)) if policy.hierarchical else None
     started = time.perf_counter()
     env, env_training_rules = (
-        run_episodes(episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical),
+        run_episodes(episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical,
+                                   **environment),
                      lambda batch: policy.act(batch.obs), choose_goals, return_to_base_ends_search=flight_rules)
         for flight_rules in (True, False))
     env_seconds = time.perf_counter() - started
-    scenarios = episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical).scenarios
+    scenarios = episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical,
+                              **environment).scenarios
     episodes = [ReplayEpisode(Mission(scenario=scenario, flight=flight, name=scenario.name), args.policy, seed=i,
                               out=None, video=False) for i, scenario in enumerate(scenarios)]
     done: list[dict] = []

@@ -91,6 +91,9 @@ class BeliefStepOutcome:
     """(N, 2) the goal point this step flew towards (before any re-grounding)."""
     belief_removed: np.ndarray
     """The belief this step's look removed: the chance, under the crew's model, that it detected the victim."""
+    identify_chance: np.ndarray
+    """The chance, under the crew's model, that this step's look identified an unresolved candidate: the
+    identification probability at the candidates' estimates (not where they really are), 0 when too fast."""
 
 
 class BeliefSearchState:
@@ -119,6 +122,7 @@ class BeliefSearchState:
         self._flat_target = np.zeros((n, 2))
         self._flat_target_due = True  # computed when a flat policy asks for it (HRL-SAC never does)
         self._estimates, self._kind = np.zeros((n, t, 2)), np.zeros((n, t), dtype=np.int64)
+        self._identify_chance = np.zeros(n)
         self._arange = np.arange(n)
 
     # ------------------------------------------------------------------ episodes and goals
@@ -243,7 +247,7 @@ class BeliefSearchState:
         self.altitude_target[:] = np.where(self.close_look(), min(flight.altitude_m, CLOSE_LOOK_ALTITUDE_M),
                                            flight.altitude_m)
         return BeliefStepOutcome(success, collision, out_of_bounds, ran_dry, returned, distance, reached, moved_on,
-                                 step_goal_point, removed)
+                                 step_goal_point, removed, self._identify_chance)
 
     def _update_candidates(self, sighted: np.ndarray, intensity: np.ndarray, zoom: np.ndarray, dt_s: float) -> None:
         """Sightings of the reported category (N, T) become or update candidates; close looks identify them."""
@@ -265,9 +269,14 @@ class BeliefSearchState:
         self.unseen_look_s[sighted] = 0.0
 
         slow = (self.speed_mps <= CLOSE_LOOK_SPEED_MPS)[:, None]
-        identify = search.detection_probability_from_factors(self.position, self.targets,
-                                                             scen.target_size_m * IDENTIFY_SIZE_FACTOR,
+        size = scen.target_size_m * IDENTIFY_SIZE_FACTOR
+        identify = search.detection_probability_from_factors(self.position, self.targets, size,
                                                              scen.detection_factor, self.altitude, zoom, intensity)
+        elapsed = (self.time_s[:, None] - self.sighted_s)[:, :, None]
+        estimates = self.sighting + scen.forecast_drift[:, None, :] * elapsed
+        expected = search.detection_probability_from_factors(self.position, estimates, size, scen.detection_factor,
+                                                             self.altitude, zoom, intensity) * slow * unresolved_before
+        self._identify_chance = 1.0 - np.prod(1.0 - expected, axis=1)
         draws = keyed_uniforms(self.episode_seed ^ IDENTIFY_STREAM, self.steps, self.max_targets)
         identified = unresolved_before & slow & (draws < identify)
         victim = np.zeros_like(identified)
@@ -276,8 +285,6 @@ class BeliefSearchState:
         self.status[identified & ~victim] = REJECTED
 
         # Hovering over where a candidate should be without sighting it: after LOST_AFTER_S it is lost.
-        elapsed = (self.time_s[:, None] - self.sighted_s)[:, :, None]
-        estimates = self.sighting + scen.forecast_drift[:, None, :] * elapsed
         near = np.hypot(*(estimates - self.position[:, None, :]).transpose(2, 0, 1))
         looking = (self.status == UNRESOLVED) & ~sighted & slow & (near <= self.flight.reach_radius_m)
         self.unseen_look_s[looking] += dt_s

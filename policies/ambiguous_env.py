@@ -70,6 +70,7 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
                 "victim_confirmed": victim == CONFIRMED,
                 "position": self.position, "goal_point": out.step_goal_point, "goal_reached": out.goal_reached,
                 "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
-                "belief_removed": out.belief_removed, "energy_left": self.energy_left,
+                "belief_removed": out.belief_removed, "identify_chance": out.identify_chance,
+                "energy_left": self.energy_left,
                 "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info

@@ -5,7 +5,8 @@ Per step, with g the point the step flew towards (the goal's point; flat SAC: Tr
 ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``) minus
 ``cross_track_penalty`` x the metres flown sideways to the line to g, + ``coverage_bonus`` per newly covered cell (or
 per cell of ground swept, ``coverage_swept``; SarSearch-v1: per cell of cumulative probability of detection; times the intensity with ``coverage_by_intensity``),
-+ ``belief_bonus`` x the belief the look removed (SarSearch-v1), + ``detection_bonus`` x the first-detection
++ ``belief_bonus`` x the belief the look removed and ``identify_bonus`` x the chance that a close look identified a
+candidate (both SarSearch-v1, both under the crew's model), + ``detection_bonus`` x the first-detection
 chance (SarSearch-v0); HRL-SAC adds ``intrinsic_goal_bonus`` on completing g and ``extrinsic_weight`` x the
 environment reward without its per-step cost; flat SAC adds that environment reward whole (still without the
 per-step cost: with it, leaving the area at once, -10, is worth about as much as a long search).
@@ -61,6 +62,7 @@ def shaped_reward(config: TrainConfig, hrl: bool, start: StepStart, actions: np.
     out = ((toward - cfg.cross_track_penalty * sideways) / cfg.intrinsic_scale_m
            + cfg.coverage_bonus * searched_cells(cfg, start, actions, info)
            + cfg.belief_bonus * info.get("belief_removed", 0.0)
+           + cfg.identify_bonus * info.get("identify_chance", 0.0)
            + cfg.detection_bonus * info.get("first_detection_chance", 0.0))
     if hrl:
         # The bonus pays for completing g (info["goal_completed"]), not for being within reach of it: over an

@@ -119,6 +119,22 @@ def test_a_decoy_becomes_a_candidate_and_a_close_look_rejects_it():
     assert state.altitude_target[0] == FLIGHT.altitude_m  # resolved: back up to search
 
 
+def test_the_identify_chance_is_the_identification_probability_at_the_estimate_and_needs_a_slow_drone():
+    state = state_for(decoys=[(300.0, -200.0)])
+    hover_until_sighted(state, (300.0, -200.0), 1)
+    out = hover(state, (300.0, -200.0), 1, zoom=0.6, intensity=0.0)[0]  # sensor off: no chance
+    assert out.identify_chance[0] == 0.0
+    altitude = state.altitude[0]
+    # right over the estimate (the decoy has not moved): f_range = 1, a person's size over 6.4, zoom factor 2.8
+    expected = 0.98 * (1.0 - math.exp(-OBJECT_SIZE_M[0] / 6.4 * 2.8 * RESOLUTION_SCALE / (altitude - DESCENT_MPS)))
+    out = hover(state, (300.0, -200.0), 1, zoom=0.6)[0]
+    assert out.identify_chance[0] == pytest.approx(expected)
+    fast = state_for(decoys=[(300.0, -200.0)])
+    hover_until_sighted(fast, (300.0, -200.0), 1)
+    out = fast.advance(np.array([[300.0, -196.0]]), np.ones(1), np.full(1, 0.6), 1.0)  # 4 m/s: too fast
+    assert out.identify_chance[0] == 0.0
+
+
 def test_the_camera_descends_at_the_descent_rate_for_a_close_look():
     state = state_for(decoys=[(300.0, -200.0)])
     hover_until_sighted(state, (300.0, -200.0), 1)
