@@ -94,7 +94,9 @@ def _fly(client: UdpClient, config: VehicleConfig) -> None:
     # Stop the stream: within COM_OF_LOSS_T (+ margin) the failsafe takes over and the vehicle stops.
     client.stream = None
     client.wait(lambda: mode_of(client.latest["HEARTBEAT"]) is FlightMode.POSCTL, 3.0, "offboard-loss failsafe")
-    assert any(m.get_type() == "STATUSTEXT" and "Failsafe" in m.text for m in client.received)
+    # the announcement goes out in its own message, possibly after the heartbeat that shows the new mode
+    client.wait(lambda: any(m.get_type() == "STATUSTEXT" and "Failsafe" in m.text for m in client.received), 2.0,
+                "the failsafe's STATUSTEXT")
     client.pump(3.0)
     stopped = client.latest["LOCAL_POSITION_NED"]
     assert math.hypot(stopped.vx, stopped.vy) < 0.5, "the failsafe must not keep flying the last velocity"

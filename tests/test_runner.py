@@ -212,14 +212,22 @@ def test_a_nan_action_gets_zero_velocity_then_rtl(policy, tmp_path):
     assert [t["to"] for t in report["transitions"]][-3:] == ["RTL", "LAND", "DONE"]
 
 
-def test_the_geofence_guard_turns_back_a_policy_flying_out_of_the_area(policy, tmp_path):
+@pytest.mark.parametrize("layers", ["shield and guard", "guard alone"])
+def test_the_geofence_guard_turns_back_a_policy_flying_out_of_the_area(policy, tmp_path, monkeypatch, layers):
+    """Two layers keep a policy inside the fence: the pilot's safety shield (missions.shield, as in training) and
+    the runner's geofence guard on the 20 Hz filtered pose. With the shield switched off the guard alone must hold
+    (a pilot or artifact that does not shield its commands); with both, the shield acts first."""
+    if layers == "guard alone":
+        monkeypatch.setattr("autonomy.search_pilot.shield_velocity", lambda position, velocity, *zones: velocity)
+
     def east_at_full_speed(obs):
         return torch.tensor([[0.0, 1.0, 1.0, 0.0]]).expand(obs.shape[0], 4).contiguous()
 
     mission = small_mission(max_steps=120)  # 120 s east at 8 m/s would end 960 m east of a fence at 300 m
     report = replay_mission(mission, with_actions(policy, east_at_full_speed), seed=5, out=tmp_path, video=False)
     assert report["search_end"] == "step limit"  # never left the geofence
-    assert any(e["event"] == "geofence" for e in report["events"])
+    guard_acted = any(e["event"] == "geofence" for e in report["events"])
+    assert guard_acted == (layers == "guard alone")
     east = np.array([e for _, _, e in report["trajectory"]])
     assert east.max() < mission.fence.east_max_m and east[-1] > mission.fence.east_max_m - 60.0
 

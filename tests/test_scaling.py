@@ -262,7 +262,9 @@ def test_evaluate_command_with_workers_writes_the_serial_metrics(sweep_runs, tmp
                              "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert result.returncode == 0, result.stderr
     assert "evaluating 11 episodes on 3 local processes" in result.stderr
-    assert json.loads(out.read_text()) == evaluate_checkpoint(run, "val", 11)
+    written = json.loads(out.read_text())
+    assert written.pop("scenarios") == "generator split val"  # the command labels what it flew
+    assert written == evaluate_checkpoint(run, "val", 11)
 
 
 # ---------------------------------------------------------------------------------------------- mission replay
