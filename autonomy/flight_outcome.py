@@ -17,8 +17,9 @@ Outcomes:
   (over a search area at sea that is the loss of the drone, whatever the autopilot thought it was doing); it
   outranks ``safe`` and ``completed``: a drone that descended into the water is not an end state to grade safe.
 * ``flyaway``: the vehicle went more than ``FlyawayLimits.fence_excursion_m`` beyond the geofence, or kept flying
-  OFFBOARD with no fresh setpoint for longer than ``FlyawayLimits.stale_setpoint_s`` (PX4's default offboard-loss
-  time plus half a second: a vehicle whose failsafe was set later, or off, is caught too), or kept moving in GUIDED
+  OFFBOARD with no fresh setpoint for longer than its COM_OF_LOSS_T (at most ``FlyawayLimits.slowest_failsafe_s``)
+  plus ``FlyawayLimits.failsafe_margin_s`` (a vehicle whose failsafe was set later than that, or off, is caught
+  too; a 3 s COM_OF_LOSS_T is a configured choice, flown as such), or kept moving in GUIDED
   with no fresh setpoint for longer than its GUID_TIMEOUT plus ``FlyawayLimits.guided_stop_margin_s`` (by then
   ArduPilot must have stopped it), or was still flying in another mode when the settling time ran out.
 
@@ -50,9 +51,12 @@ class FlyawayLimits:
 
     fence_excursion_m: float = 50.0
     """The vehicle beyond the geofence by more than this (m, true position) is a flyaway."""
-    stale_setpoint_s: float = 1.5
-    """Flying OFFBOARD with no setpoint for longer than this (s) is a flyaway (PX4's offboard-loss failsafe acts
-    after COM_OF_LOSS_T, 1 s by default)."""
+    failsafe_margin_s: float = 0.5
+    """Flying OFFBOARD with no setpoint for longer than the vehicle's COM_OF_LOSS_T plus this (s) is a flyaway:
+    PX4's offboard-loss failsafe acts after COM_OF_LOSS_T (1 s by default, so 1.5 s)."""
+    slowest_failsafe_s: float = 5.0
+    """...but a COM_OF_LOSS_T above this (s) counts as this: an offboard-loss failsafe later than 5 s (or one set
+    to 60 s, i.e. off in practice) lets a vehicle fly on blind for too long to be an acceptable set-up."""
     guided_stop_margin_s: float = 5.0
     """Still moving in GUIDED with no setpoint for longer than GUID_TIMEOUT plus this (s) is a flyaway: ArduPilot
     stops the vehicle after GUID_TIMEOUT (3 s by default), and stopping from 20 m/s at 5 m/s^2 takes 4 s."""
@@ -64,7 +68,8 @@ class FlyawayLimits:
     """Touching the surface farther than this from home (m, true position) is ditching."""
 
     def __post_init__(self) -> None:
-        check_fields(self, (("fence_excursion_m", 0.0, 10_000.0), ("stale_setpoint_s", 0.1, 60.0),
+        check_fields(self, (("fence_excursion_m", 0.0, 10_000.0), ("failsafe_margin_s", 0.1, 60.0),
+                            ("slowest_failsafe_s", 0.1, 60.0),
                             ("guided_stop_margin_s", 0.1, 60.0),
                             ("settle_s", 0.0, 7200.0), ("hold_settle_s", 0.0, 600.0),
                             ("home_radius_m", 0.0, 10_000.0)))
@@ -126,7 +131,8 @@ class FlightWatch:
             if vehicle.is_ardupilot and gap > status.setpoint_timeout_s + limits.guided_stop_margin_s \
                     and self._moving():
                 self.flyaway = f"still moving in {status.mode_name} with no setpoint for {gap:.1f} s at {now:.1f} s"
-            elif not vehicle.is_ardupilot and gap > limits.stale_setpoint_s:
+            elif not vehicle.is_ardupilot and gap > min(status.setpoint_timeout_s, limits.slowest_failsafe_s) \
+                    + limits.failsafe_margin_s:
                 self.flyaway = f"flying {status.mode_name} with no setpoint for {gap:.1f} s at {now:.1f} s"
 
     def settle(self) -> None:

@@ -448,8 +448,22 @@ def test_a_vehicle_without_a_working_failsafe_is_caught_as_a_flyaway(policy):
     report = fly(policy, "up.outage=25:10", vehicle_params={"COM_OF_LOSS_T": 60.0})
     outcome = report["outcome"]
     assert outcome["outcome"] == "flyaway"
-    assert outcome["reason"].startswith("flying OFFBOARD with no setpoint for 1.5")
-    assert outcome["vehicle_failsafes"] == [] and outcome["longest_offboard_setpoint_gap_s"] > 1.5
+    assert outcome["reason"].startswith("flying OFFBOARD with no setpoint for 5.5")  # slowest_failsafe_s + 0.5
+    assert outcome["vehicle_failsafes"] == [] and outcome["longest_offboard_setpoint_gap_s"] > 5.5
+
+
+def test_a_three_second_com_of_loss_t_is_flown_as_configured_and_the_search_resumed(policy):
+    """PX4 with COM_OF_LOSS_T = 3 s: through a 10 s outage the vehicle flies its last setpoint for 3 s (configured,
+    not a flyaway), then its failsafe switches it to POSCTL, and the runner resumes once the link is back."""
+    report = fly(policy, "outage=25:10", vehicle_params={"COM_OF_LOSS_T": 3.0})
+    outcome = report["outcome"]
+    assert [f["reason"] for f in outcome["vehicle_failsafes"]] == [
+        "Failsafe: offboard setpoints lost for 3.0 s, switching to POSCTL"]
+    assert outcome["vehicle_failsafes"][0]["time_s"] == pytest.approx(25.0 + 3.0, abs=0.06)
+    assert 2.9 <= outcome["longest_offboard_setpoint_gap_s"] <= 3.5
+    (resume,) = [e for e in report["events"] if e["event"] == "resume"]
+    assert 35.0 <= resume["time_s"] <= 35.5
+    assert outcome["outcome"] == "completed" and searched_to_its_own_end(report)
 
 
 def test_a_faulty_replay_is_bit_reproducible(policy, tmp_path):

@@ -75,8 +75,9 @@ def test_px4_gets_an_amsl_take_off_and_no_mode_request_before_arming(policy, tmp
     assert takeoff[1] == pytest.approx(small_mission().launch_point.alt_m + small_mission().flight.altitude_m, abs=0.01)
 
 
-def test_ardupilot_stops_in_guided_during_a_ten_second_outage_and_the_search_carries_on(policy):
-    report = fly(policy, "ardupilot", faults="outage=20:10")
+@pytest.mark.parametrize("guid_timeout_s", [1.0, 3.0, 5.0])  # 3 s: ArduPilot's default
+def test_ardupilot_stops_in_guided_during_a_ten_second_outage_and_the_search_carries_on(policy, guid_timeout_s):
+    report = fly(policy, "ardupilot", faults="outage=20:10", params={"GUID_TIMEOUT": guid_timeout_s})
     assert events(report, "link") == ["no telemetry for 1 s: holding position",
                                       "telemetry lost for 3.0 s: waiting up to 60 s for it to come back"]
     assert events(report, "resume") == [] and report["failsafes"] == []  # GUID_TIMEOUT: no mode change
