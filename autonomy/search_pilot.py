@@ -56,7 +56,7 @@ class Decision:
     """Whether the meta-controller decided this step."""
     end: str | None = None
     """None while searching; else one of END_REASONS: "victim reached" (the one success), "return to base" (the
-    meta-controller chose ReturnToBase), "returned home" (a flat policy came back over home), "endurance exhausted"
+    meta-controller chose ReturnToBase after the drone had left home), "returned home" (a flat policy came back over home), "endurance exhausted"
     (the sortie's endurance is used up), "step limit", "entered a danger zone" or "left the geofence"."""
     action: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     """The policy's raw action (NaN if it returned one: the runner's guard decides)."""
@@ -110,7 +110,9 @@ class SearchPilot:
             goal = int(self.policy.select_goal(observe_search(state, True)[0, :LAYOUT_V4.meta_dim]))
             state.set_goals(np.array([goal]))
             new_goal = True
-            if goal == RETURN_TO_BASE:
+            if goal == RETURN_TO_BASE and state.left_home[0]:
+                # Home, once the drone has been away (as the environment's "returned"): the runner's RTL flies it.
+                # Chosen before it has left, ReturnToBase holds over home until the next decision, as in training.
                 end = "return to base"
         obs = observe_search(state, self.policy.hierarchical)
         action = self.policy.act(obs[0]).astype(np.float64)

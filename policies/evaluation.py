@@ -31,7 +31,8 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
 
     ``act(core)`` returns (N, 4) actions; ``choose_goals(meta_obs)`` (HRL) returns goal indices for the rows it
     is given, called every K steps. ``return_to_base_ends_search``: the mission runner's rule (a ReturnToBase
-    decision ends the search: the vehicle is sent home with RTL) instead of training's (ReturnToBase is a sub-goal
+    decision ends the search once the drone has left home (SarSearch-v1; on v0 always): the vehicle is sent home
+    with RTL) instead of training's (ReturnToBase is a sub-goal
     like the others, flown by the low level until the next decision); used to compare flight with the
     environment on equal terms (benchmarks/sim_to_sitl.py).
     """
@@ -54,7 +55,7 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
                 goals[decide] = choose_goals(core.meta_observation[decide])
                 core.set_goals(goals, decide)
                 if return_to_base_ends_search:
-                    gave_up = decide & (goals == RETURN_TO_BASE)
+                    gave_up = decide & (goals == RETURN_TO_BASE) & getattr(core, "left_home", True)
                     _record_end(record, gave_up, core.steps, core.first_detection_step, core.episode_return,
                                 core.coverage_ratio)
                     segments += gave_up  # the ReturnToBase segment counts, unreached, as in flight

@@ -258,3 +258,53 @@ def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_fra
         if terminated[0]:
             env_end = "victim reached" if info["success"][0] else "another end"
     assert env_end == pilot_end == "victim reached" and straight_legs > 10
+
+
+class GoalScript(ScriptedArtifact):
+    """ScriptedArtifact with a fixed sequence of goals, one per decision (the last one repeated)."""
+
+    def __init__(self, goals):
+        super().__init__("target")
+        self.goals, self.decisions = list(goals), 0
+
+    def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
+        goal = self.goals[min(self.decisions, len(self.goals) - 1)]
+        self.decisions += 1
+        return np.full(meta_obs.shape[:-1], goal)
+
+
+def test_return_to_base_ends_the_flown_search_only_once_the_drone_has_left_home():
+    """In training ReturnToBase at home is a hover until the next decision (the episode's "returned" needs the
+    drone to have been away); the pilot and the evaluation's flight rule read it the same way, and end the search
+    (the runner's RTL) only when it is chosen away from home."""
+    from autonomy.search_pilot import SearchPilot
+    from missions.goals import RETURN_TO_BASE
+    from missions.mission import Mission
+
+    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=700.0,
+                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-first")
+    pilot = SearchPilot(Mission(scenario=scenario), GoalScript([RETURN_TO_BASE, TRACK_OBJECT, RETURN_TO_BASE]), seed=7)
+    position, ends = np.zeros(2), []
+    for step in range(61):
+        decision = pilot.decide(position.copy())
+        ends.append(decision.end)
+        if decision.end is not None:
+            break
+        position = position + np.array(decision.velocity_ne) * 1.0  # flown exactly, 1 s per step
+        if step < 30:
+            assert np.hypot(*position) < 1.0  # ReturnToBase at home: a hover over home
+    assert ends[:60] == [None] * 60  # the first ReturnToBase (at home) did not end the search
+    assert ends[60] == "return to base" and np.hypot(*position) > 50.0  # the second, chosen away from home, did
+
+
+def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_does():
+    from missions.goals import RETURN_TO_BASE
+    from policies.env_core import SarSearchConfig, make_batch
+    from policies.evaluation import run_episodes
+
+    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,
+                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
+    core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0, 1])
+    record = run_episodes(core, lambda c: np.zeros((c.n, 4), dtype=np.float32),
+                          lambda meta_obs: np.full(len(meta_obs), RETURN_TO_BASE), return_to_base_ends_search=True)
+    assert record["length"].tolist() == [200, 200]  # never away from home: hovered until the endurance ran out
