@@ -26,7 +26,8 @@ from policies.env_core import SarSearchConfig, make_batch
 from policies.evaluation import run_episodes, summarise
 from policies.train import Trainer
 
-pytestmark = pytest.mark.slow
+# slow; about 90 s each here, but a CI run on a slower 2-core machine once took over 300 s (the suite default)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 FLIGHT = FlightSettings(max_steps=100, subgoal_interval=10)
 NET = NetworkConfig(hidden=(64, 64))
 
