@@ -129,3 +129,20 @@ def test_a_reboot_on_the_ground_before_arming_restarts_the_estimate_and_the_miss
     assert report["vehicle_time"]["timeline_changes"] == 1 and change.startswith("vehicle rebooted: time_boot_ms 600.")
     assert report["estimator"]["reinitialisations"] == 1
     assert states(report) == ALL_STATES and report["outcome"]["outcome"] == "completed"
+
+
+# ---------------------------------------------------------------------------------------- telemetry rates
+@pytest.mark.parametrize("autopilot, profile", [("px4", "px4"), ("px4", "px4_sitl"), ("ardupilot", "ardupilot")])
+def test_the_runner_flies_with_each_autopilots_default_telemetry_rates(policy, autopilot, profile, tmp_path):
+    """PX4's onboard-mode rates on the companion link (GLOBAL_POSITION_INT 50 Hz, LOCAL_POSITION_NED 30 Hz), PX4
+    SITL's, and ArduPilot's (nothing streams until the runner asks): the same mission flies to its own end."""
+    report = fly(policy, autopilot, tmp_path=tmp_path, telemetry_profile=profile)
+    assert report["outcome"]["outcome"] == "completed" and searched_to_its_own_end(report)
+    assert report["failsafes"] == [] and report["estimator"]["reinitialisations"] == 0
+    positions = [m for m in read_tlog(tmp_path / "flight.tlog") if m.get_type() == "GLOBAL_POSITION_INT"]
+    rate_hz = (len(positions) - 1) / ((positions[-1].time_boot_ms - positions[0].time_boot_ms) / 1000.0)
+    expected = {"px4": 50.0, "px4_sitl": 50.0, "ardupilot": None}[profile]  # ArduPilot: what the runner asked for
+    if expected is not None:
+        assert rate_hz == pytest.approx(expected, rel=0.1)
+    else:
+        assert rate_hz >= 4.0  # streams were requested: without, ArduPilot sends no positions at all
