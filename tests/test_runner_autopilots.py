@@ -8,16 +8,19 @@ are the realism options of the flight-side issue.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
+import torch
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.policy import Policy, load_policy
 from autonomy.replay import airframe_for, replay_mission
+from missions.goals import TRACK_OBJECT
 from sitl_bridge.faults import parse_link_faults
 from sitl_bridge.vehicle import VehicleConfig
-from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission
+from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
 
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 ALL_STATES = ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]
@@ -111,8 +114,13 @@ def test_a_vehicle_booted_ten_minutes_before_the_runner_is_flown_on_the_runners_
 @pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
 def test_a_reboot_in_the_air_ends_the_search_without_acting_on_an_extrapolated_pose(policy, autopilot):
     """The autopilot reboots 10 s into the search and is silent for 20 s; it falls (motors off). The runner holds,
-    never decides or guards on the pose extrapolated over the gap, and ends the search on the disarmed vehicle."""
-    report = fly(policy, autopilot, boot_time_s=600.0, reboot_at_s=27.0, reboot_downtime_s=20.0)
+    never decides or guards on the pose extrapolated over the gap, and ends the search on the disarmed vehicle.
+    The policy is made to head for the search area (TrackObject, full speed towards its point), so that the fall
+    happens away from home whatever the shipped policy would do there."""
+    outbound = dataclasses.replace(
+        with_actions(policy, lambda obs: torch.tensor([[1.0, 0.0, 1.0, 0.0]]).expand(obs.shape[0], 4).contiguous()),
+        _select_goal=lambda meta_obs: torch.full((meta_obs.shape[0],), TRACK_OBJECT, dtype=torch.int64))
+    report = fly(outbound, autopilot, boot_time_s=600.0, reboot_at_s=27.0, reboot_downtime_s=20.0)
     assert report["search_end"] == "vehicle disarmed" and states(report)[-2:] == ["SEARCH", "DONE"]
     assert events(report, "failsafe") == ["the vehicle is disarmed"]
     assert events(report, "geofence") == []
