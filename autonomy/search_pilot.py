@@ -56,8 +56,9 @@ class Decision:
     """Whether the meta-controller decided this step."""
     end: str | None = None
     """None while searching; else one of END_REASONS: "victim reached" (the one success), "return to base" (the
-    meta-controller chose ReturnToBase after the drone had left home), "returned home" (a flat policy came back over home), "endurance exhausted"
-    (the sortie's endurance is used up), "step limit", "entered a danger zone" or "left the geofence"."""
+    meta-controller chose ReturnToBase after the drone had left home), "returned home" (a flat policy came back
+    over home), "endurance exhausted" (the sortie's endurance is used up), "step limit", "entered a danger zone" or
+    "left the geofence"."""
     action: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     """The policy's raw action (NaN if it returned one: the runner's guard decides)."""
     altitude_m: float | None = None

@@ -47,7 +47,8 @@ def main() -> int:
     trained = policy.manifest.training_config
     flight = FlightSettings(**trained["flight"])
     # the environment the artifact was trained in (SarSearch-v1, its action frame)
-    environment = {"task": trained.get("task", "SarSearch-v1"), "action_frame": trained.get("action_frame", "north_east")}
+    environment = {"task": trained.get("task", "SarSearch-v1"),
+                   "action_frame": trained.get("action_frame", "north_east")}
     choose_goals = (lambda meta_obs: policy.select_goal(meta_obs)) if policy.hierarchical else None
     started = time.perf_counter()
     env, env_training_rules = (
@@ -86,7 +87,8 @@ def main() -> int:
     agree = float(np.mean(np.asarray(env["success"]) == np.asarray(replay_success)))
     print(f"  gap {gap:.1f} points (target <= 5); same outcome in {agree:.0%} of scenarios; replay ends: {ends}")
     write_report(args.out, {"policy": args.policy, "policy_sha256": policy.sha256, "split": args.split,
-                            "episodes": args.episodes, "workers": args.workers, **results, "gap_points": gap, "same_outcome": agree,
+                            "episodes": args.episodes, "workers": args.workers, **results, "gap_points": gap,
+                            "same_outcome": agree,
                             "replay_ends": ends, "wall_s": {"environment": env_seconds, "replay": replay_seconds}})
     return 0
 

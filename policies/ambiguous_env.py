@@ -63,7 +63,7 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
         truncated = (self.steps >= flight.max_steps) & ~terminated
         victim = self.status[self._arange, self.scen.primary_index]
         info = {"success": out.success, "collision": out.collision, "out_of_bounds": out.out_of_bounds,
-                "ran_dry": out.ran_dry, "returned": out.returned,
+                "ran_dry": out.ran_dry, "returned": out.returned, "returned_with_reserve": with_reserve,
                 "distance_to_victim_m": out.distance_to_victim_m, "coverage_ratio": self.coverage_ratio,
                 "searched_cells": self.searched_cells,
                 "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,

@@ -171,6 +171,11 @@ class TrainConfig:
     ReturnToBase within 25,000 steps (meta entropy 0.06 against a target of 1.23: hovering at home cost less per
     segment than the early low level's exits and collisions), and the low level then learned little but hovering
     (docs/results/README.md)."""
+    meta_returned_reward: float | None = None
+    """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
+    environment's +20 (``policies.ambiguous_env.REWARD_RETURNED``); None = the environment's. The task, its reward
+    and its success are unchanged: only what the meta-controller learns from. Why: with +20 for any return after
+    a 50 m excursion, the meta-only phase collapsed onto ReturnToBase (docs/results/README.md, "SarSearch-v1")."""
     meta_only_entropy_scale: float = 0.1
     """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
     that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
@@ -297,9 +302,11 @@ class TrainConfig:
                                 ("meta_only_entropy_scale", 0.0, 1.0), ("initial_alpha", 1e-6, 100.0),
                                 ("intrinsic_scale_m", 1e-3, 1e6), ("cross_track_penalty", 0.0, 1e3),
                                 ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4),
-                                ("identify_bonus", 0.0, 1e4),
+                                ("identify_bonus", 0.0, 1e4), ("meta_returned_reward", -1e3, 1e3),
                                 ("action_margin", 0.0, 1.0)):
             value = getattr(self, name)
+            if name == "meta_returned_reward" and value is None:  # the environment's
+                continue
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
         if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"

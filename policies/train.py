@@ -43,6 +43,7 @@ from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.config import TrainConfig
 from policies.discrete_sac import DiscreteSAC
+from policies.ambiguous_env import REWARD_RETURNED
 from policies.env_core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
 from policies.n_step import NStepReturns
 from policies.normalizer import RunningMeanStd
@@ -191,7 +192,7 @@ class Trainer:
             self.normalizer.update(self.obs)
         completed = 0
         if self.hrl:
-            self.segment_return += cfg.meta_gamma ** self.segment_steps * reward
+            self.segment_return += cfg.meta_gamma ** self.segment_steps * meta_learning_reward(cfg, reward, info)
             self.segment_steps += 1
             finish = (self.segment_steps >= cfg.flight.subgoal_interval) | done
             if finish.any() and self.meta_learns:
@@ -409,3 +410,11 @@ class Trainer:
             writer.writeheader()
             writer.writerows(rows)
         os.replace(tmp, path)
+
+
+def meta_learning_reward(cfg: TrainConfig, reward: np.ndarray, info: dict) -> np.ndarray:
+    """The environment reward the meta-controller learns from: with ``meta_returned_reward`` set, a return home
+    with reserve pays that instead of the environment's REWARD_RETURNED (SarSearch-v1)."""
+    if cfg.meta_returned_reward is None or "returned_with_reserve" not in info:
+        return reward
+    return reward + (cfg.meta_returned_reward - REWARD_RETURNED) * info["returned_with_reserve"]

@@ -13,7 +13,7 @@ from missions.belief_search import (CLOSE_LOOK_ALTITUDE_M, CONFIRMED, DESCENT_MP
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
 from missions.scenario import Conditions, Scenario, SearchArea, Target
-from missions.search import GRID_SIZE, OBJECT_SIZE_M, RESOLUTION_SCALE, ScenarioBatch, condition_factor
+from missions.search import GRID_SIZE, OBJECT_SIZE_M, RESOLUTION_SCALE, ScenarioBatch
 
 AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)
 CELL_M = 1000.0 / GRID_SIZE

@@ -102,6 +102,15 @@ def test_running_dry_costs_50_and_coming_home_with_reserve_pays_20():
         left = 1.0 - info["steps"] / endurance
         assert terminated and info["returned"] and (left >= RETURN_RESERVE) == (paid > 0.0)
         assert reward == paid
+        assert bool(np.asarray(info["returned_with_reserve"])) == (paid > 0.0)
+        # TrainConfig.meta_returned_reward replaces the +20 in what the meta-controller learns from, nothing else
+        from policies.config import TrainConfig
+        from policies.train import meta_learning_reward
+
+        learned = meta_learning_reward(TrainConfig(meta_returned_reward=-5.0), np.array([reward]),
+                                       {k: np.atleast_1d(v) for k, v in info.items()})
+        assert learned.tolist() == [-5.0 if paid > 0.0 else 0.0]
+        assert meta_learning_reward(TrainConfig(), np.array([reward]), info).tolist() == [reward]
 
 
 def test_the_caps_on_targets_and_obstacles_are_configurable():
