@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hrlsac mission replay missions/library/demo.yaml --policy policies/pretrained/sac.pt
+	$(BIN)/hrlsac mission replay missions/library/demo.yaml --policy policies/pretrained/hrl-sac.pt
 
 # One worker per core (at most 4), whole test files per worker so that module fixtures are built once.
 test: $(STAMP)
