@@ -1,4 +1,4 @@
-"""``hrlsac train``: train HRL-SAC or flat SAC on SarSearch-v0 into a run folder (resumable)."""
+"""``hrlsac train``: HRL-SAC or flat SAC on SarSearch-v1 or v0 (--set task=...) into a run folder (resumable)."""
 from __future__ import annotations
 
 import argparse
