@@ -224,9 +224,8 @@ class TrainConfig:
     """SarSearch-v1: learning reward plus this many times the chance, under the crew's model, that the step's close
     look identified an unresolved candidate (``info["identify_chance"]``: the identification probability at the
     candidates' estimates, 0 above the close-look speed). It pays for what a close look needs (a hover, zoom,
-    the sensor on) where the goal bonus pays only once the candidate is resolved. 0 = off. Without it the low level
-    of probe E flew its close looks at 6.8 m/s on average, slow enough to identify in 8 % of them
-    (docs/results/README.md)."""
+    the sensor on) where the goal bonus pays only once the candidate is resolved. 0 = off (the shipped runs: 50,
+    docs/results/README.md)."""
     flat_shaping: bool = False
     """Flat SAC learns from the shaping the HRL low level gets, towards the observation's target (TrackObject's
     point: a candidate, else the most probable place): the progress to it, the cross-track penalty, the coverage
@@ -309,6 +308,9 @@ class TrainConfig:
                 continue
             if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        if self.meta_returned_reward is not None and self.task != "SarSearch-v1":
+            raise ValueError(f"TrainConfig.meta_returned_reward applies to SarSearch-v1 only (its return home), got "
+                             f"{self.meta_returned_reward!r} on {self.task}; leave it unset (None)")
         if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"
                                                                  and self.task != "SarSearch-v1"):
             raise ValueError(f"TrainConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "

@@ -165,3 +165,12 @@ def test_in_the_target_frame_the_constant_action_flies_straight_at_the_target():
     assert abs(travelled[0] * direction[1] - travelled[1] * direction[0]) < 1.0  # no sideways drift at all
     with pytest.raises(ValueError, match="action_frame must be 'north_east', or 'target' on SarSearch-v1"):
         SarSearchConfig(task="SarSearch-v0", action_frame="target")
+
+
+def test_meta_returned_reward_is_refused_on_a_task_without_a_return_home():
+    from policies.config import TrainConfig
+
+    with pytest.raises(ValueError, match="meta_returned_reward applies to SarSearch-v1 only"):
+        TrainConfig(task="SarSearch-v0", meta_returned_reward=0.0, low_level_ignores=("coverage",))
+    with pytest.raises(ValueError, match=r"TrainConfig.meta_returned_reward must be in \[-1000, 1000\]"):
+        TrainConfig(meta_returned_reward=float("nan"))
