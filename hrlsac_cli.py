@@ -14,15 +14,25 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "sitl": ("sitl_bridge.cli", "run the simulated multirotor (PX4 or ArduPilot) and wait for MAVLink clients"),
     "demo": ("sitl_bridge.scripted_flight", "fly a short scripted mission in the simulated vehicle and report"),
-    "train": ("policies.train_cli", "train HRL-SAC or flat SAC on the search environment (resumable)"),
-    "sweep": ("policies.sweep_cli", "train a grid of runs (algorithm x preset x seed x hyper-parameters) on Ray"),
-    "evaluate": ("policies.evaluate_cli", "the paper's metrics of a trained run on a scenario split"),
+    "train": ("policies.cli.train", "train HRL-SAC or flat SAC on the search environment (resumable)"),
+    "sweep": ("policies.cli.sweep", "train a grid of runs (algorithm x preset x seed x hyper-parameters) on Ray"),
+    "evaluate": ("policies.cli.evaluate", "the paper's metrics of a trained run on a scenario split"),
     "dataset": ("missions.dataset_cli", "make the synthetic SAR dataset or inspect a YOLO dataset"),
-    "compare": ("policies.compare_cli", "compare trained runs and the scripted baselines: markdown report and figures"),
-    "export": ("policies.export_cli", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
+    "compare": ("policies.cli.compare", "compare trained runs and the scripted baselines: markdown report and figures"),
+    "export": ("policies.cli.export", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
     "policy": ("autonomy.policy_cli", "inspect an exported policy artifact (policy info) with the on-board runtime"),
-    "mission": ("autonomy.mission_cli", "fly a search mission with a policy: replay in the simulated vehicle, or run"),
+    "mission": ("", "fly a search mission with a policy: replay in the simulated vehicle, or run"),
     "keygen": ("missions.keygen_cli", "write a fresh MAVLink 2 signing key file (for --signing-key)"),
+}
+
+# Commands whose subcommands live in different packages: name -> {subcommand: (module, summary)}. The replay
+# belongs with the simulator (``simulation``), the real flight with the on-board runtime (``autonomy``), which
+# must not import the simulator.
+GROUPS: dict[str, dict[str, tuple[str, str]]] = {
+    "mission": {
+        "replay": ("simulation.replay_cli", "fly the mission in the simulated vehicle, in lockstep (deterministic)"),
+        "run": ("autonomy.mission_cli", "fly the mission on a MAVLink vehicle in real time"),
+    },
 }
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"
@@ -36,6 +46,25 @@ def _help() -> str:
     lines += [f"  {name:<{width}}  {summary}" for name, (_, summary) in COMMANDS.items()]
     lines += ["", "Run 'hrlsac COMMAND --help' for the options of one command."]
     return "\n".join(lines)
+
+
+def _choose_subcommand(name: str, rest: list[str]) -> int | None:
+    """None if ``rest`` starts with one of the group's subcommands; otherwise print its help or an argparse-style
+    error and return the exit code."""
+    subcommands = GROUPS[name]
+    if rest and rest[0] in subcommands:
+        return None
+    usage = f"usage: hrlsac {name} [-h] COMMAND ..."
+    if rest and rest[0] in ("-h", "--help"):
+        width = max(len(sub) for sub in subcommands)
+        print("\n".join([usage, "", COMMANDS[name][1] + ".", "", "commands:"]
+                        + [f"  {sub:<{width}}  {summary}" for sub, (_, summary) in subcommands.items()]
+                        + ["", f"Run 'hrlsac {name} COMMAND --help' for the options of one command."]))
+        return 0
+    problem = (f"argument COMMAND: invalid choice: '{rest[0]}' (choose from {', '.join(subcommands)})" if rest
+               else "the following arguments are required: COMMAND")
+    print(f"{usage}\nhrlsac {name}: error: {problem}", file=sys.stderr)
+    return 2
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,9 +85,15 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"hrlsac: error: unknown command '{name}' (choose from {', '.join(COMMANDS)})", file=sys.stderr)
         return 2
+    prog, module_name = f"hrlsac {name}", COMMANDS[name][0]
+    if name in GROUPS:
+        chosen = _choose_subcommand(name, rest)
+        if isinstance(chosen, int):
+            return chosen
+        module_name, rest, prog = GROUPS[name][rest[0]][0], rest[1:], f"{prog} {rest[0]}"
     try:
-        module = importlib.import_module(COMMANDS[name][0])
-        return int(module.main(rest, prog=f"hrlsac {name}") or 0)
+        module = importlib.import_module(module_name)
+        return int(module.main(rest, prog=prog) or 0)
     except KeyboardInterrupt:
         print(f"hrlsac {name}: interrupted", file=sys.stderr)
         return 130

@@ -4,7 +4,7 @@ A policy file is only safe to fly if the runtime feeds it the observation it was
 actions the way it was trained to emit them. The manifest carries that contract (observation layout, action
 spec, goals and K) beside the provenance (training config, evaluation metrics, source checkpoint hash, torch
 version, time of export), as JSON inside the artifact (see docs/export.md). The exporter
-(``policies.export``) writes it; the runtime (``autonomy.policy``) reads and checks it before loading weights.
+(``policies.export.artifact``) writes it; the runtime (``autonomy.policy``) reads and checks it before loading weights.
 
 ``FORMAT_VERSION`` counts incompatible changes of the artifact (the programs' interface or the manifest's
 fields); a runtime refuses versions it does not know. Adding a manifest field is not such a change: readers
@@ -17,7 +17,12 @@ import json
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from autonomy.observation import META_OBS_DIM, OBS_DIM, OBSERVATION_LAYOUT_VERSION, layout_description
+from autonomy.observation import (
+    META_OBS_DIM,
+    OBS_DIM,
+    OBSERVATION_LAYOUT_VERSION,
+    layout_description,
+)
 
 FORMAT_VERSION = 1
 FORMATS = ("torchscript", "torch-export")

@@ -1,4 +1,4 @@
-"""What a mission leaves behind in its output folder: the tlog, the JSON report, a trajectory PNG, an MP4 replay.
+"""What a mission leaves behind in its output folder: the tlog and the JSON report (a replay adds pictures).
 
 * ``flight.tlog``: every MAVLink message in both directions, each prefixed by the 8-byte big-endian time in
   microseconds (the tlog format of MAVProxy and QGroundControl; ``mavlogdump.py flight.tlog`` reads it). The
@@ -9,7 +9,7 @@
   going, a partial report marked ``"complete": false`` is rewritten the same way (when the run starts, then at most
   once per wall second as it goes, see :class:`PartialReport`); the last write has ``"complete": true``. A killed
   run therefore leaves the report of its state at most a second before the kill, never a torn file.
-* ``trajectory.png`` and ``replay.mp4``: the search drawn by ``missions.render`` after every decision.
+* ``trajectory.png`` and ``replay.mp4`` (replays only, ``simulation.video``): the search drawn after every decision.
 """
 from __future__ import annotations
 
@@ -22,14 +22,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
-import cv2
-import numpy as np
-
 TLOG = "flight.tlog"
 REPORT = "report.json"
-TRAJECTORY = "trajectory.png"
-VIDEO = "replay.mp4"
-VIDEO_FPS = 20
 
 
 class TlogRecorder:
@@ -108,29 +102,3 @@ class PartialReport:
         write_json_atomic(self.path, report)
         self.writes += 1
         self._last_write = time.monotonic()
-
-
-class VideoRecorder:
-    """Frames (RGB) into an MP4 (OpenCV's mp4v codec); the last frame is also the trajectory PNG."""
-
-    def __init__(self, folder: Path):
-        self.folder = Path(folder)
-        self._writer = None
-        self.last_frame: np.ndarray | None = None
-        self.frames = 0
-
-    def add(self, rgb: np.ndarray) -> None:
-        bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-        if self._writer is None:
-            height, width = bgr.shape[:2]
-            self._writer = cv2.VideoWriter(str(self.folder / VIDEO), cv2.VideoWriter_fourcc(*"mp4v"), VIDEO_FPS,
-                                           (width, height))
-        self._writer.write(bgr)
-        self.last_frame = bgr
-        self.frames += 1
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.release()
-        if self.last_frame is not None:
-            cv2.imwrite(str(self.folder / TRAJECTORY), self.last_frame)

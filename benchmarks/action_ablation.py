@@ -36,18 +36,17 @@ import sys
 
 import numpy as np
 import torch
+from common import results_file, write_report
 
 from autonomy.observation import LAYOUT_V3
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from missions.search import SENSOR_ON_INTENSITY
-from policies.baselines import fly_straight
-from policies.baselines_v0 import ZOOM as SCRIPTED_ZOOM
-from policies.checkpoint_policy import CheckpointPolicy
-from policies.env_core import CAMERA_ZOOM, SEARCH_INTENSITY
-from policies.evaluation import episode_batch, run_episodes, summarise
-from policies.parallel_evaluation import padded
-
-from common import results_file, write_report
+from policies.checkpoint import CheckpointPolicy
+from policies.env.baselines import fly_straight
+from policies.env.baselines_v0 import ZOOM as SCRIPTED_ZOOM
+from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
+from policies.evaluation.episodes import episode_batch, run_episodes, summarise
+from policies.evaluation.parallel import padded
 
 MOVEMENT = slice(0, 2)  # the action's movement components (docs/environment.md)
 COVERAGE = LAYOUT_V3.by_name["coverage"].slice  # SarSearch-v0's map

@@ -13,11 +13,11 @@ import argparse
 import sys
 import time
 
-from policies.baseline_eval import run_baseline
-from policies.baselines import BASELINES
-from policies.baselines_v0 import BASELINES_V0
-
 from common import results_file, write_report
+
+from policies.env.baselines import BASELINES
+from policies.env.baselines_v0 import BASELINES_V0
+from policies.evaluation.baselines import run_baseline
 
 
 def main() -> int:

@@ -17,13 +17,12 @@ import time
 
 import gymnasium
 import numpy as np
+from common import results_file, summarise, write_report
 
 import policies  # noqa: F401  (registers SarSearch-v0)
-from policies.env import SarSearchEnv
-from policies.env_core import SarSearchConfig
-from policies.vector_env import SarSearchVectorEnv
-
-from common import summarise, results_file, write_report
+from policies.env.core import SarSearchConfig
+from policies.env.gym_env import SarSearchEnv
+from policies.env.vector import SarSearchVectorEnv
 
 
 def single_steps_per_s(env, steps: int) -> float:

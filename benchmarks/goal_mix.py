@@ -14,12 +14,11 @@ import collections
 import sys
 
 import torch
+from common import results_file, write_report
 
 from missions.goals import GOAL_NAMES
-from policies.checkpoint_policy import CheckpointPolicy
-from policies.evaluation import episode_batch, run_episodes, summarise
-
-from common import results_file, write_report
+from policies.checkpoint import CheckpointPolicy
+from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
 
 def goal_mix(run: str, split: str, episodes: int) -> dict:

@@ -1,9 +1,9 @@
 """Mission outcomes under link faults, on both autopilot personalities: completed, ended safely (with the
 reason), ditched or flyaway, over several seeds.
 
-Each condition is flown as a lockstep mission replay (``autonomy.replay``) against the simulated PX4 or ArduPilot
+Each condition is flown as a lockstep mission replay (``simulation.mission_replay``) against the simulated PX4 or ArduPilot
 Copter with the faults on the vehicle's end of the link, both directions, seeded by the run's seed; the outcome is
-judged from the simulator's ground truth (``autonomy.flight_outcome``). "Completed" means the search ran to its own
+judged from the simulator's ground truth (``simulation.flight_outcome``). "Completed" means the search ran to its own
 end and the vehicle landed and disarmed at home: a search that the runner resumed after the vehicle's link-loss
 failsafe counts, one that the outage ended does not. Outages start 10 s into the search (the search start of each
 seed's clean run). ArduPilot is flown twice for the outages: with its defaults (GUID_TIMEOUT stops it, the GCS
@@ -20,14 +20,13 @@ import time
 from collections import Counter
 
 import torch
+from common import results_file, write_report
 
 from autonomy.policy import load_policy
-from autonomy.replay import airframe_for, replay_mission
 from missions.mission_file import load_mission
+from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.faults import parse_link_faults
 from sitl_bridge.vehicle import VehicleConfig
-
-from common import results_file, write_report
 
 LOSS_CONDITIONS = ("loss=0", "loss=0.1", "loss=0.3", "loss=0.3,burst=5")
 OUTAGE_LENGTHS_S = (0.5, 2.0, 10.0)

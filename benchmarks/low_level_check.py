@@ -15,14 +15,13 @@ import sys
 
 import numpy as np
 import torch
+from common import results_file, write_report
 
 from missions.belief_search import target_frame_to_north_east
 from missions.goals import GOAL_NAMES
-from policies.checkpoint_policy import CheckpointPolicy
-from policies.evaluation import END_KEYS, episode_batch
-from policies.parallel_evaluation import padded
-
-from common import results_file, write_report
+from policies.checkpoint import CheckpointPolicy
+from policies.evaluation.episodes import END_KEYS, episode_batch
+from policies.evaluation.parallel import padded
 
 
 def fly_goal(policy: CheckpointPolicy, goal: int, split: str, episodes: int) -> dict:

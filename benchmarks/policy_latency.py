@@ -4,7 +4,7 @@ lower bound of each network, plus artifact sizes.
 For each preset (untrained HRL-SAC agents built from ``TrainConfig.from_preset``; or the policy of --checkpoint) the
 same policy runs three ways, each through the call a runner makes (numpy observation in, numpy out):
 
-  * eager:        policies.checkpoint_policy.CheckpointPolicy (numpy normaliser + SAC.act / DiscreteSAC.act)
+  * eager:        policies.checkpoint.CheckpointPolicy (numpy normaliser + SAC.act / DiscreteSAC.act)
   * torchscript:  autonomy.policy.load_policy of the TorchScript artifact
   * torch-export: autonomy.policy.load_policy of the torch.export artifact (ExportedProgram.module())
 
@@ -32,11 +32,11 @@ import torch
 
 from autonomy.observation import META_OBS_DIM
 from autonomy.policy import load_policy
-from policies.checkpoint_policy import CheckpointPolicy
+from policies.checkpoint import CheckpointPolicy
 from policies.config import TrainConfig
-from policies.export import artifact_bytes, build_manifest
-from policies.export_module import policy_module
-from policies.export_parity import record_observations
+from policies.export.artifact import artifact_bytes, build_manifest
+from policies.export.module import policy_module
+from policies.export.parity import record_observations
 
 from common import results_file, write_report
 

@@ -15,14 +15,13 @@ import sys
 import time
 
 import torch
+from common import results_file, summarise, write_report
 
 from autonomy.policy import load_policy
-from autonomy.replay import airframe_for, replay_mission, start_point
 from missions.mission_file import load_mission
+from simulation.mission_replay import airframe_for, replay_mission, start_point
 from sitl_bridge.link import memory_link_pair
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
-
-from common import summarise, results_file, write_report
 
 
 def vehicle_only(mission, seconds: float) -> float:

@@ -23,15 +23,14 @@ import time
 
 import numpy as np
 import torch
+from common import results_file, write_report
 
 from autonomy.policy import load_policy
-from autonomy.parallel_replay import ReplayEpisode, replay_episodes
-from autonomy.worker_pool import PoolConfig
 from missions.mission import FlightSettings, Mission
-from policies.evaluation import episode_batch, run_episodes
-from policies.evaluation_stats import wilson_interval
-
-from common import results_file, write_report
+from policies.evaluation.episodes import episode_batch, run_episodes
+from policies.evaluation.stats import wilson_interval
+from simulation.parallel_replay import ReplayEpisode, replay_episodes
+from simulation.worker_pool import PoolConfig
 
 
 def main() -> int:

@@ -4,7 +4,7 @@ For each network preset both agents train on SarSearch-v0 (the same environment,
 with one gradient update of batch 128 per environment step, one environment, one torch thread, in the same run
 (the agents take turns inside every repeat, so a change of machine load hits all of them alike):
 
-  * ours:      policies.train.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
+  * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
                the preset's networks (LayerNorm after each hidden layer, no dropout).
   * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
   * ours_bf16, ours_noln_bf16: the two above with ``TrainConfig.update_dtype="bfloat16"`` (the hidden layers'
@@ -12,7 +12,7 @@ with one gradient update of batch 128 per environment step, one environment, one
                float32). The same work per step; the speed-up needs AVX-512 BF16 or AMX (this machine has
                AVX-512 BF16).
   * sb3:       stable_baselines3.SAC("MlpPolicy", train_freq=1, gradient_steps=1, batch_size=128,
-               learning_starts=--warmup, net_arch=hidden widths, device="cpu") on policies.env.SarSearchEnv.
+               learning_starts=--warmup, net_arch=hidden widths, device="cpu") on policies.env.gym_env.SarSearchEnv.
   * ours_vec8: extra line, NOT the same work: our vectorised configuration, num_envs=8 and updates_per_step=0.125
                (one update per 8 environment steps).
 
@@ -41,9 +41,10 @@ import time
 import torch
 
 from policies.config import NetworkConfig, TrainConfig
-from policies.env import SarSearchEnv
-from policies.env_core import SarSearchConfig
-from policies.train import Trainer
+from policies.env.gym_env import SarSearchEnv
+from policies.env.core import SarSearchConfig
+from policies.evaluation.parallel import quick_success_rate
+from policies.training.trainer import Trainer
 
 from common import summarise, results_file, write_report
 
@@ -69,7 +70,7 @@ def our_config(hidden: tuple[int, ...], layer_norm: bool, num_envs: int, updates
 def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, float]:
     """(wall, CPU) steps/s of Trainer.run over ``steps`` steps after ``warmup`` untimed random ones."""
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = Trainer(config, run_dir)
+        trainer = Trainer(config, run_dir, evaluate=quick_success_rate)
         trainer.run(progress=False, stop_at=warmup)
         clock: dict[str, tuple[float, float]] = {}
         save = trainer.save

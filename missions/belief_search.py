@@ -1,6 +1,6 @@
 """The state of N searches of SarSearch-v1, advanced one decision step at a time: what training and flight share.
 
-The training environment (``policies.ambiguous_env``) and the mission runner's pilot (``autonomy.search_pilot``)
+The training environment (``policies.env.ambiguous``) and the mission runner's pilot (``autonomy.search_pilot``)
 both keep a :class:`BeliefSearchState`; they differ only in where the drone's position comes from. What the
 search logic knows is what a crew knows: the area, the charted danger zones, the datum and its forecast drift,
 the conditions, its own position and its own sightings. Which object is the victim it learns only from a close

@@ -1,6 +1,6 @@
 """The state of N searches in progress, advanced one decision step at a time: what training and flight share.
 
-The training environment (``policies.env_core``) and the mission runner (``autonomy.runner``) both keep a
+The training environment (``policies.env.core``) and the mission runner (``autonomy.runner``) both keep a
 :class:`SearchState`; they differ only in where the drone's position comes from (the exact dynamics in
 training, the Kalman-filtered telemetry in flight). One step, :meth:`SearchState.advance`, given the position
 the drone reached and the sensor settings it flew with:
@@ -22,9 +22,10 @@ import numpy as np
 
 from missions import goals as goal_logic
 from missions import search
-from missions.mission import FlightSettings
 from missions.goals import NO_GOAL
+from missions.mission import FlightSettings
 from missions.scenario import CATEGORIES
+
 
 def splitmix64(x: np.ndarray) -> np.ndarray:
     """A fast, well-mixed 64-bit hash (SplitMix64 finaliser); uint64 arithmetic wraps on purpose."""

@@ -11,5 +11,5 @@ import gymnasium
 
 for _task in ("SarSearch-v0", "SarSearch-v1"):
     if _task not in gymnasium.registry:
-        gymnasium.register(id=_task, entry_point="policies.env:SarSearchEnv",
-                           vector_entry_point="policies.vector_env:SarSearchVectorEnv", kwargs={"task": _task})
+        gymnasium.register(id=_task, entry_point="policies.env.gym_env:SarSearchEnv",
+                           vector_entry_point="policies.env.vector:SarSearchVectorEnv", kwargs={"task": _task})

@@ -173,7 +173,7 @@ class TrainConfig:
     (docs/results/README.md)."""
     meta_returned_reward: float | None = None
     """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
-    environment's +20 (``policies.ambiguous_env.REWARD_RETURNED``); None = the environment's. The task, its reward
+    environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward
     and its success are unchanged: only what the meta-controller learns from. Why: with +20 for any return after
     a 50 m excursion, the meta-only phase collapsed onto ReturnToBase (docs/results/README.md, "SarSearch-v1")."""
     meta_only_entropy_scale: float = 0.1

@@ -6,7 +6,7 @@ subclass of :class:`AutopilotBase`. The vehicle talks to both through the same m
 ``prearm_failure``, ``heartbeat_fields`` and ``battery_charge_state``. No I/O and no MAVLink encoding happens here.
 
 :class:`FlightStatus` is the personality-neutral view of "what is the autopilot doing" for code that must judge a
-flight without knowing PX4 or ArduPilot modes (``autonomy.flight_outcome``): read ``vehicle.autopilot.status``.
+flight without knowing PX4 or ArduPilot modes (``simulation.flight_outcome``): read ``vehicle.autopilot.status``.
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ decides when the next tick happens:
 
 * :class:`LockstepClock`: nothing advances until the caller steps; runs as fast as the CPU allows and
   is bit-reproducible (no wall time leaks into any message).
-* :class:`WallClock`: ticks are paced to real time, optionally sped up (``speed`` = simulated seconds per
+* :class:`PacedClock`: ticks are paced to real time, optionally sped up (``speed`` = simulated seconds per
   wall second), for real clients over UDP.
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ class LockstepClock:
         """Return at once: the next tick may run immediately."""
 
 
-class WallClock:
+class PacedClock:
     """Paces simulated time to the wall clock, ``speed`` simulated seconds per wall second."""
 
     def __init__(self, speed: float = 1.0):

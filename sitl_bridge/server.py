@@ -17,7 +17,7 @@ from typing import Callable
 
 from missions.signing import wall_timestamp
 from sitl_bridge.autopilot import AutopilotEvent
-from sitl_bridge.clock import WallClock
+from sitl_bridge.clock import PacedClock
 from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now
 from sitl_bridge.link import TcpServerLink, UdpLink
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
@@ -57,7 +57,7 @@ class VehicleServer:
         """``link_faults``: injected on every UDP link, timed on the wall clock from now, seeded by the vehicle's
         seed (plus the link's index) unless they carry their own seed. Link order (ArduPilot's SRn_ index, the
         signing link id): API then GCS without a TCP port (PX4), else TCP, GCS, API (ArduPilot)."""
-        self.clock = WallClock(speed)
+        self.clock = PacedClock(speed)
         order = ("tcp", "gcs", "api") if ports.tcp_port is not None else ("api", "gcs")
         self.links: list[UdpLink | TcpServerLink] = []
         try:

@@ -28,10 +28,10 @@ from autonomy.policy_manifest import MANIFEST_FILE
 from autonomy.torch_compat import torchscript_calls
 from missions.mission import FlightSettings
 from missions.mission_file import LIBRARY_DIR
-from policies.checkpoint_policy import CheckpointPolicy
+from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
-from policies.export import artifact_bytes, build_manifest
-from policies.export_module import policy_module
+from policies.export.artifact import artifact_bytes, build_manifest
+from policies.export.module import policy_module
 
 NET = NetworkConfig(hidden=(16, 16), head=8, dropout=0.1)
 FUZZ = settings(derandomize=True, deadline=None, database=None,

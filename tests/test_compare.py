@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 import pytest
 
-from policies import compare_cli
-from policies.compare import compare, t_interval, t_quantile_975
+from policies.cli import compare as compare_cli
 from policies.config import TrainConfig
-from policies.evaluation import summarise
-from policies.train import LOG_FIELDS
+from policies.evaluation.episodes import summarise
+from policies.reports.compare import compare, t_interval, t_quantile_975
+from policies.training.trainer import LOG_FIELDS
 
 EPISODES = 10
 MAX_STEPS = 500  # every fake run (and so the baselines) flies with this step limit, not the preset's 1000

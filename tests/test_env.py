@@ -15,10 +15,25 @@ import policies  # noqa: F401  (registers SarSearch-v0)
 from autonomy.observation import LAYOUT_V3, TARGET_OFFSET_SCALE_M
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
-from missions.scenario import Conditions, Obstacle, Scenario, SeaState, SearchArea, Target, TimeOfDay, Weather
-from policies.env import SarSearchEnv
-from policies.env_core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_STEP, REWARD_TARGET, SarSearchConfig
-from policies.vector_env import SarSearchVectorEnv
+from missions.scenario import (
+    Conditions,
+    Obstacle,
+    Scenario,
+    SearchArea,
+    SeaState,
+    Target,
+    TimeOfDay,
+    Weather,
+)
+from policies.env.core import (
+    REWARD_BOUNDARY,
+    REWARD_COLLISION,
+    REWARD_STEP,
+    REWARD_TARGET,
+    SarSearchConfig,
+)
+from policies.env.gym_env import SarSearchEnv
+from policies.env.vector import SarSearchVectorEnv
 
 V0 = "SarSearch-v0"
 FIELDS_BY_NAME, OBSERVATION_FIELDS = LAYOUT_V3.by_name, LAYOUT_V3.fields

@@ -11,10 +11,10 @@ import policies  # noqa: F401  (registers SarSearch-v1)
 from autonomy.observation import LAYOUT_V4, PLAN_OFFSET_SCALE_M
 from missions.mission import FlightSettings
 from missions.scenario import Obstacle, Scenario, SearchArea, Target
-from policies.ambiguous_env import REWARD_RAN_DRY, REWARD_RETURNED, RETURN_RESERVE
-from policies.env import SarSearchEnv
-from policies.env_core import REWARD_TARGET, SarSearchConfig
-from policies.vector_env import SarSearchVectorEnv
+from policies.env.ambiguous import RETURN_RESERVE, REWARD_RAN_DRY, REWARD_RETURNED
+from policies.env.core import REWARD_TARGET, SarSearchConfig
+from policies.env.gym_env import SarSearchEnv
+from policies.env.vector import SarSearchVectorEnv
 
 AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)
 HOVER = np.zeros(4, dtype=np.float32)
@@ -105,7 +105,7 @@ def test_running_dry_costs_50_and_coming_home_with_reserve_pays_20():
         assert bool(np.asarray(info["returned_with_reserve"])) == (paid > 0.0)
         # TrainConfig.meta_returned_reward replaces the +20 in what the meta-controller learns from, nothing else
         from policies.config import TrainConfig
-        from policies.train import meta_learning_reward
+        from policies.training.trainer import meta_learning_reward
 
         learned = meta_learning_reward(TrainConfig(meta_returned_reward=-5.0), np.array([reward]),
                                        {k: np.atleast_1d(v) for k, v in info.items()})

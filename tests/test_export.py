@@ -22,13 +22,23 @@ from autonomy.policy_manifest import NOT_EVALUATED, PolicyManifest
 from autonomy.torch_compat import TORCHSCRIPT_DEPRECATION, torchscript_calls
 from missions.goals import GOAL_NAMES
 from missions.mission import FlightSettings
-from policies.checkpoint_policy import CheckpointPolicy
+from policies.checkpoint import CheckpointPolicy
+from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
-from policies.export import ParityError, artifact_bytes, build_manifest, export_policy
-from policies.export_cli import main as export_main
-from policies.export_module import policy_module
-from policies.export_parity import ACTION_TOLERANCE, Parity, check_parity, record_observations
-from policies.train import Trainer
+from policies.export.artifact import (
+    ParityError,
+    artifact_bytes,
+    build_manifest,
+    export_policy,
+)
+from policies.export.module import policy_module
+from policies.export.parity import (
+    ACTION_TOLERANCE,
+    Parity,
+    check_parity,
+    record_observations,
+)
+from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")
 FORMATS = ("torchscript", "torch-export")
@@ -131,7 +141,7 @@ def test_plain_torch_loaders_run_the_artifact(runs, artifacts, recorded, fmt):
 
 
 def test_failed_parity_check_writes_nothing(runs, tmp_path, monkeypatch):
-    monkeypatch.setattr("policies.export.check_parity", lambda *args: Parity(10, 1e-3, 0))
+    monkeypatch.setattr("policies.export.artifact.check_parity", lambda *args: Parity(10, 1e-3, 0))
     with pytest.raises(ParityError, match="parity check failed"):
         export_policy(runs["sac"], tmp_path / "policy.pt", check=True)
     assert list(tmp_path.iterdir()) == []
@@ -200,7 +210,7 @@ def test_refuses_an_artifact_with_another_observation_layout(runs, tmp_path, fmt
 
 def test_a_sarsearch_v0_run_is_not_exported_for_the_runtime_that_flies_v1():
     from policies.config import TrainConfig
-    from policies.export_module import policy_module
+    from policies.export.module import policy_module
 
     v0 = CheckpointPolicy.untrained(TrainConfig.from_preset("default", task="SarSearch-v0"))
     with pytest.raises(ValueError, match=r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"):

@@ -12,7 +12,7 @@ import json
 import pytest
 import yaml
 
-from autonomy import mission_cli
+import hrlsac_cli
 from autonomy.policy import load_policy
 from autonomy.preflight import flight_mismatches
 from missions.mission import FlightSettings
@@ -32,7 +32,7 @@ def demo_with(tmp_path, **flight) -> str:
 @pytest.mark.parametrize("command", [["replay"], ["run", "--connect", "udpin:127.0.0.1:9"]])
 def test_a_mission_at_another_altitude_is_refused_before_flying(tmp_path, capsys, command):
     mission = demo_with(tmp_path, altitude_m=40)
-    code = mission_cli.main([command[0], mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"),
+    code = hrlsac_cli.main(["mission", command[0], mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"),
                              *command[1:]])
     assert code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
@@ -56,7 +56,7 @@ def test_every_differing_setting_is_named():
 
 def test_with_the_flag_the_mission_flies_and_the_warning_names_the_difference(tmp_path, capsys):
     mission = demo_with(tmp_path, max_steps=80)
-    code = mission_cli.main(["replay", mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"), "--no-video",
+    code = hrlsac_cli.main(["mission", "replay", mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"), "--no-video",
                              "--quiet", "--accept-flight-mismatch"])
     assert code == 0
     err = capsys.readouterr().err

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pymavlink import mavutil
+from test_link_faults import PRETRAINED
+from test_runner import small_mission
 
 from autonomy.policy import load_policy
 from autonomy.recorder import PartialReport
-from autonomy.replay import replay_mission
 from missions.mission_file import save_mission
-from test_link_faults import PRETRAINED
-from test_runner import small_mission
+from simulation.mission_replay import replay_mission
 
 HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
 

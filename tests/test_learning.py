@@ -22,9 +22,9 @@ from missions.mission import FlightSettings, Mission
 from missions.mission_file import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
-from policies.env_core import SarSearchConfig, make_batch
-from policies.evaluation import run_episodes, summarise
-from policies.train import Trainer
+from policies.env.core import SarSearchConfig, make_batch
+from policies.evaluation.episodes import run_episodes, summarise
+from policies.training.trainer import Trainer
 
 # slow; about 90 s each here, but a CI run on a slower 2-core machine once took over 300 s (the suite default)
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]

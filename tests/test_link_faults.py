@@ -3,7 +3,7 @@
 The fault model's statistics are checked on seeded packet streams through real links (the in-memory pair and real
 UDP sockets) driven by a hand-stepped clock; the missions are whole lockstep replays (real MAVLink bytes, the real
 runner and the simulated PX4-like vehicle) with the faults on the vehicle's end of the link, judged from the
-simulator's ground truth by ``autonomy.flight_outcome``.
+simulator's ground truth by ``simulation.flight_outcome``.
 """
 from __future__ import annotations
 
@@ -14,23 +14,29 @@ import time
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as mavlink
-
-from autonomy import mission_cli
-from autonomy import replay as replay_module
-from autonomy.flight_outcome import FlyawayLimits
-from autonomy.policy import Policy, load_policy
-from autonomy.link_loss import LinkLossConfig
-from autonomy.runner import RunnerConfig
-from autonomy.replay import airframe_for, replay_mission, start_point
 from conftest import free_udp_ports
+from pymavlink.dialects.v20 import common as mavlink
+from test_runner import searched_to_its_own_end, small_mission
+
+import hrlsac_cli
+from autonomy.link_loss import LinkLossConfig
+from autonomy.policy import Policy, load_policy
+from autonomy.runner import RunnerConfig
 from missions.mission_file import save_mission
+from simulation import mission_replay as replay_module
+from simulation.flight_outcome import FlyawayLimits
+from simulation.mission_replay import airframe_for, replay_mission, start_point
 from sitl_bridge import cli as sitl_cli
-from sitl_bridge.faults import FaultModel, FaultyLink, LinkFaults, Outage, parse_link_faults
+from sitl_bridge.faults import (
+    FaultModel,
+    FaultyLink,
+    LinkFaults,
+    Outage,
+    parse_link_faults,
+)
 from sitl_bridge.link import UdpLink, memory_link_pair
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.vehicle import VehicleConfig
-from test_runner import searched_to_its_own_end, small_mission
 
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 TICK_S = 0.01
@@ -230,7 +236,7 @@ def test_a_bad_spec_is_one_line_naming_the_problem(spec, message, capsys, tmp_pa
     assert str(error.value).startswith("--link-faults: ") and message in str(error.value)
     mission = tmp_path / "small.yaml"
     save_mission(small_mission(), mission)
-    assert mission_cli.main(["replay", str(mission), "--policy", PRETRAINED, "--link-faults", spec]) == 2
+    assert hrlsac_cli.main(["mission", "replay", str(mission), "--policy", PRETRAINED, "--link-faults", spec]) == 2
     assert sitl_cli.main(["--link-faults", spec, "--api-port", "0", "--gcs-remote", "0"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 2 and message in lines[0] and message in lines[1]
@@ -481,7 +487,7 @@ def test_a_faulty_replay_is_bit_reproducible(policy, tmp_path):
 def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, tmp_path, capsys):
     mission = tmp_path / "small.yaml"
     save_mission(small_mission(), mission)
-    code = mission_cli.main(["replay", str(mission), "--policy", PRETRAINED, "--seed", "5", "--no-video",
+    code = hrlsac_cli.main(["mission", "replay", str(mission), "--policy", PRETRAINED, "--seed", "5", "--no-video",
                              "--out", str(tmp_path / "out"), "--link-faults", "outage=25:2",
                              "--accept-flight-mismatch"])
     assert code == 0

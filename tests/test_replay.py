@@ -9,8 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from policies.normalizer import RunningMeanStd
-from policies.replay import PrioritizedReplayBuffer, SumTree, linear_beta
+from policies.agents.normalizer import RunningMeanStd
+from policies.agents.prioritized_replay import (
+    PrioritizedReplayBuffer,
+    SumTree,
+    linear_beta,
+)
 
 SCALAR_FIELDS = {"value": ((), np.float32)}
 TRANSITION_FIELDS = {"obs": ((6,), np.float32), "action": ((2,), np.float32), "reward": ((), np.float32),

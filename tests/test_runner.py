@@ -20,19 +20,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import free_udp_ports
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.policy import Policy, load_policy
-from autonomy.replay import replay_mission
 from autonomy.vehicle_link import COMPANION_COMPONENT
-from conftest import free_udp_ports
 from missions.mission import FlightSettings, Mission
 from missions.mission_file import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
-from policies.export import export_policy
-from policies.train import Trainer
+from policies.export.artifact import export_policy
+from policies.training.trainer import Trainer
+from simulation.mission_replay import replay_mission
 
 FLIGHT = FlightSettings(altitude_m=20.0, max_speed_mps=8.0, max_steps=40, subgoal_interval=10)
 NET = NetworkConfig(hidden=(32, 32))

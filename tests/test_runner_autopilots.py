@@ -14,13 +14,19 @@ import math
 import pytest
 import torch
 from pymavlink.dialects.v20 import common as mavlink
+from test_runner import (
+    ours,
+    read_tlog,
+    searched_to_its_own_end,
+    small_mission,
+    with_actions,
+)
 
 from autonomy.policy import Policy, load_policy
-from autonomy.replay import airframe_for, replay_mission
 from missions.goals import TRACK_OBJECT
+from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.faults import parse_link_faults
 from sitl_bridge.vehicle import VehicleConfig
-from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
 
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 ALL_STATES = ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]

@@ -13,9 +13,8 @@ from torch import nn
 from torch.distributions import Independent, Normal, TransformedDistribution
 from torch.distributions.transforms import TanhTransform
 
-from policies.config import NetworkConfig, TrainConfig
-from policies.discrete_sac import DiscreteSAC
-from policies.networks import (
+from policies.agents.discrete_sac import DiscreteSAC
+from policies.agents.networks import (
     ActionScaler,
     CategoricalActor,
     SquashedGaussianActor,
@@ -23,7 +22,8 @@ from policies.networks import (
     TwinQDiscrete,
     mlp,
 )
-from policies.sac import SAC
+from policies.agents.sac import SAC
+from policies.config import NetworkConfig, TrainConfig
 
 ENV_LOW = np.array([-1.0, -1.0, 0.0, 0.0], dtype=np.float32)
 ENV_HIGH = np.array([1.0, 1.0, 1.0, 1.0], dtype=np.float32)

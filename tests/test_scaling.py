@@ -23,15 +23,22 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from autonomy.parallel_replay import ReplayEpisode, replay_episodes
-from autonomy.worker_pool import PoolConfig, contiguous_chunks, run_tasks
 from missions.mission import FlightSettings, Mission
 from missions.mission_file import load_mission, save_mission
 from missions.scenario import Scenario, SearchArea, Target
-from policies.evaluation import evaluate_checkpoint
-from policies.sweep import SWEEP_REPORT, check_run_folders, run_sweep
-from policies.sweep_config import SweepFileError, load_sweep, sweep_from_dict
-from policies.sweep_table import DONE, FAILED, SKIPPED, ProgressTable, RunStatus, render
+from policies.evaluation.episodes import evaluate_checkpoint
+from policies.reports.sweep_table import (
+    DONE,
+    FAILED,
+    SKIPPED,
+    ProgressTable,
+    RunStatus,
+    render,
+)
+from policies.training.sweep import SWEEP_REPORT, check_run_folders, run_sweep
+from policies.training.sweep_config import SweepFileError, load_sweep, sweep_from_dict
+from simulation.parallel_replay import ReplayEpisode, replay_episodes
+from simulation.worker_pool import PoolConfig, contiguous_chunks, run_tasks
 
 ray = pytest.importorskip("ray")
 

@@ -16,16 +16,23 @@ import sys
 import pytest
 from conftest import UdpClient, free_udp_ports
 from pymavlink.dialects.v20 import common as mavlink
+from test_runner import ALL_STATES, policy, small_mission  # noqa: F401  (policy is a module fixture)
 
 import hrlsac_cli
-from autonomy.replay import replay_mission
 from autonomy.vehicle_link import VehicleLink
 from missions.mission_file import save_mission
-from missions.signing import NEW_STREAM_MAX_AGE, SIGNED_FLAG, KeyFileError, generate_key, load_key_file, write_key_file
+from missions.signing import (
+    NEW_STREAM_MAX_AGE,
+    SIGNED_FLAG,
+    KeyFileError,
+    generate_key,
+    load_key_file,
+    write_key_file,
+)
+from simulation.mission_replay import replay_mission
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.scripted_flight import LockstepPilot, LockstepTimeout
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
-from test_runner import ALL_STATES, policy, small_mission  # noqa: F401  (policy is a module fixture)
 
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED

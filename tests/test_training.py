@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import pickle
 import subprocess
 import sys
 
@@ -15,10 +16,11 @@ from autonomy.observation import META_OBS_DIM
 from missions.goals import SEARCH_LOCATION
 from missions.mission import FlightSettings
 from missions.search import footprint_half_width_m
-from policies.checkpoint_policy import CheckpointPolicy
+from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
-from policies.evaluation import evaluate_checkpoint
-from policies.train import Trainer, cross_track_m
+from policies.evaluation.episodes import evaluate_checkpoint
+from policies.evaluation.parallel import quick_success_rate
+from policies.training.trainer import Trainer, cross_track_m
 
 SMALL = NetworkConfig(hidden=(32, 32))
 
@@ -346,11 +348,11 @@ def test_the_meta_only_phase_freezes_the_low_level_and_starts_the_meta_buffer_af
 def test_the_meta_only_phase_resumes_exactly(tmp_path):
     config = small_config("hrl-sac", total_steps=1_200, meta_only_steps=600, checkpoint_every=400,
                           meta_keep_best=True, eval_every=200, eval_episodes=4)
-    uninterrupted = Trainer(config, tmp_path / "a")
+    uninterrupted = Trainer(config, tmp_path / "a", evaluate=quick_success_rate)
     uninterrupted.run(progress=False)
-    killed = Trainer(config, tmp_path / "b")
+    killed = Trainer(config, tmp_path / "b", evaluate=quick_success_rate)
     killed.run(progress=False, stop_at=800)  # killed inside the phase, after the checkpoint at step 800
-    resumed = Trainer(config, tmp_path / "b", resume=True)
+    resumed = Trainer(config, tmp_path / "b", resume=True, evaluate=quick_success_rate)
     assert resumed.step == 800 and resumed.low_level_frozen
     resumed.run(progress=False)
     for a, b in zip(uninterrupted.meta.critic.state_dict().values(), resumed.meta.critic.state_dict().values()):
@@ -364,7 +366,8 @@ def test_the_meta_only_phase_resumes_exactly(tmp_path):
 def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
     plain = Trainer(small_config("hrl-sac", eval_every=0), tmp_path / "plain")
     plain.run(progress=False)
-    evaluated = Trainer(small_config("hrl-sac", eval_every=200, eval_episodes=4), tmp_path / "evaluated")
+    evaluated = Trainer(small_config("hrl-sac", eval_every=200, eval_episodes=4), tmp_path / "evaluated",
+                        evaluate=quick_success_rate)
     evaluated.run(progress=False)
     for a, b in zip(plain.low.actor.state_dict().values(), evaluated.low.actor.state_dict().values()):
         assert torch.equal(a, b)
@@ -381,21 +384,20 @@ def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
     assert float(evaluations[-1]) == final["success_rate"]
 
 
-def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path, monkeypatch):
+def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path):
     """The evaluations' scores are scripted (a real small run scores 0 everywhere, which would not tell the best
     apart): the joint phase's evaluation at step 500 scores highest but is not a candidate; in the phase, step
     1,100 is the best and step 1,400 only ties with it, so the run must end with step 1,100's meta-controller."""
     config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True,
                           eval_every=100, eval_episodes=4)
-    trainer = Trainer(config, tmp_path)
     scripted = {500: 1.0, 1_100: 0.75, 1_400: 0.75}
     actors = {}
 
-    def fake_flight(policy, core):
-        actors[trainer.step] = {k: v.clone() for k, v in policy.meta.actor.state_dict().items()}
-        return {"success": np.full(core.n, scripted.get(trainer.step, 0.25) >= np.linspace(0.1, 0.9, core.n))}
+    def scripted_evaluation(policy):
+        actors[policy.step] = {k: v.clone() for k, v in policy.meta.actor.state_dict().items()}
+        return scripted.get(policy.step, 0.25)
 
-    monkeypatch.setattr("policies.parallel_evaluation.fly_policy", fake_flight)
+    trainer = Trainer(config, tmp_path, evaluate=scripted_evaluation)
     trainer.run(progress=False)
     assert sorted(actors) == list(range(100, 1_700, 100))
     assert trainer.best_meta["step"] == 1_100 and trainer.best_meta["success"] == 0.75
@@ -403,6 +405,12 @@ def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp
     policy = CheckpointPolicy.load(tmp_path)  # the run, and its checkpoint, end with step 1,100's
     for actor in (trainer.meta.actor.state_dict(), policy.meta.actor.state_dict()):
         assert all(torch.equal(actor[k], actors[1_100][k]) for k in actor)
+
+
+def test_meta_keep_best_needs_an_evaluation_handed_to_the_trainer(tmp_path):
+    config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True, eval_every=100)
+    with pytest.raises(ValueError, match="meta_keep_best chooses by quick evaluations: give the Trainer an evaluate"):
+        Trainer(config, tmp_path)
 
 
 @pytest.mark.parametrize("overrides, problem", [
@@ -418,7 +426,7 @@ def test_meta_only_options_are_validated(overrides, problem):
 def test_n_step_returns_sum_the_discounted_rewards_and_bootstrap_with_gamma_to_the_n():
     """Three environments through NStepReturns with n = 3: a long episode, one ending (terminated) after two
     steps, one truncated after two: each stored transition recomputed by hand."""
-    from policies.n_step import NStepReturns
+    from policies.agents.n_step import NStepReturns
 
     acc, gamma = NStepReturns(3, 0.9, 3), 0.9
     stored = []
@@ -470,3 +478,16 @@ def test_flat_shaping_pays_the_way_to_the_target_and_the_environment_reward_with
     expected = progress + captured["reward"]  # SarSearch-v1's reward has no per-step part to leave out
     np.testing.assert_allclose(trainer.low_buffer.data["reward"][:2], expected, rtol=1e-5, atol=1e-6)
     assert np.all(np.abs(progress) > 0.01)  # the random first actions moved the drones towards or away from it
+
+
+def test_a_checkpoint_written_before_the_sub_packages_still_resumes(tmp_path):
+    """Checkpoints pickle the environments' state, naming their classes' modules; those written when the core was
+    ``policies.env_core`` (and the v1 task ``policies.ambiguous_env``) load into today's modules."""
+    from policies.checkpoint import load_environment
+
+    trainer = Trainer(small_config("hrl-sac"), tmp_path)
+    pickled = pickle.dumps(trainer.env.core)
+    old = pickled.replace(b"policies.env.core", b"policies.env_core").replace(b"policies.env.ambiguous",
+                                                                              b"policies.ambiguous_env")
+    assert old != pickled and b"policies.env_core" in old
+    assert pickle.dumps(load_environment(old)) == pickled

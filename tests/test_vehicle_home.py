@@ -11,15 +11,15 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+from test_runner import read_tlog, small_mission
 
-from autonomy.flight_outcome import FlightWatch, FlyawayLimits
 from autonomy.policy import Policy, load_policy
-from autonomy.replay import airframe_for, replay_mission
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.mission import Mission
 from missions.mission_file import load_mission, mission_to_dict, save_mission
+from simulation.flight_outcome import FlightWatch, FlyawayLimits
+from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
-from test_runner import read_tlog, small_mission
 
 PRETRAINED = "policies/pretrained/hrl-sac.pt"
 VEHICLE_HOME = GeoPoint(47.397742, 8.545594, 488.0)  # hrlsac sitl's default home

@@ -1,0 +1,325 @@
+"""Networks of the SAC agents (continuous low level / flat SAC, discrete meta-controller) and shared helpers.
+
+Every network is built from :func:`mlp` / :func:`hidden_layers`, i.e. plain ``nn.Sequential`` stacks of
+``Linear -> LayerNorm -> ReLU -> Dropout`` so that they script with TorchScript and trace with ``torch.export``.
+The algorithms (``policies.agents.sac``, ``policies.agents.discrete_sac``) own the optimisers, targets and losses.
+
+Shapes in the paper preset (``TrainConfig.from_preset("paper")``)::
+
+    SquashedGaussianActor  276 -> 512 -> 512 -> 512 -> 256 -> mean (4), log_std (4)
+    TwinQ (each of two)    280 -> 512 -> 512 -> 256 -> 1
+    CategoricalActor       272 -> 256 -> 256 -> 4 logits
+    TwinQDiscrete (each)   276 (272 + one-hot 4) -> 256 -> 256 -> 1
+
+Note: the paper's table lists the actor's last hidden layer (512 -> 256) with ReLU only; here every hidden layer,
+including the ``head``, is ``Linear -> LayerNorm -> ReLU -> Dropout`` (one rule for every network).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from policies.config import NetworkConfig
+
+LOG_2 = math.log(2.0)
+LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+# ---------------------------------------------------------------------------------------------------- MLPs
+class InputMask(nn.Module):
+    """Multiplies the inputs by a constant 0 / 1 vector: the network ignores the features marked 0.
+
+    Zeroed inputs give their first-layer weights no gradient, so the network behaves as if those features were
+    absent while keeping the input width (and the artifact's observation layout). A buffer, so that checkpoints
+    and exported artifacts carry it.
+    """
+
+    def __init__(self, keep: np.ndarray):
+        super().__init__()
+        keep = np.asarray(keep, dtype=np.float32).reshape(-1)
+        if not np.all((keep == 0.0) | (keep == 1.0)):
+            raise ValueError("InputMask.keep must hold only 0 and 1")
+        self.register_buffer("keep", torch.from_numpy(keep.copy()))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x * self.keep.to(x.dtype)
+
+
+def hidden_layers(in_dim: int, net: NetworkConfig, input_mask: np.ndarray | None = None) -> list[nn.Module]:
+    """The hidden part of an MLP: [InputMask] then, per width in ``net.layers``: Linear -> [LayerNorm] -> ReLU ->
+    [Dropout]."""
+    layers: list[nn.Module] = [] if input_mask is None else [InputMask(input_mask)]
+    width = int(in_dim)
+    for hidden in net.layers:
+        layers.append(nn.Linear(width, hidden))
+        if net.layer_norm:
+            layers.append(nn.LayerNorm(hidden))
+        layers.append(nn.ReLU())
+        if net.dropout > 0:
+            layers.append(nn.Dropout(net.dropout))
+        width = hidden
+    return layers
+
+
+def mlp(in_dim: int, net: NetworkConfig, out_dim: int, input_mask: np.ndarray | None = None) -> nn.Sequential:
+    """``hidden_layers(in_dim, net, input_mask)`` followed by a final ``Linear(net.layers[-1], out_dim)``."""
+    return nn.Sequential(*hidden_layers(in_dim, net, input_mask), nn.Linear(net.layers[-1], int(out_dim)))
+
+
+def float32_output(net: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """``net(x)`` with the last layer (the output) in float32, also inside a bfloat16 autocast region.
+
+    Under ``TrainConfig.update_dtype = "bfloat16"`` the hidden layers run their matrix products in bfloat16; the
+    outputs (Q-values, action means) keep float32 precision because small differences between them are the
+    whole learning signal (bfloat16 resolves Q = 50 only to 0.25). Outside autocast this is exactly ``net(x)``.
+    """
+    layers = list(net)
+    for layer in layers[:-1]:
+        x = layer(x)
+    with torch.autocast("cpu", enabled=False):
+        return layers[-1](x.float())
+
+
+# ---------------------------------------------------------------------------------------------------- actors
+class SquashedGaussianActor(nn.Module):
+    """Gaussian policy squashed by tanh into [-1, 1]^act_dim (SAC, Haarnoja et al. 2018, appendix C).
+
+    ``forward`` returns the pre-tanh mean and the clamped log standard deviation; ``sample`` draws a
+    reparameterised action with its log-density; ``deterministic`` is ``tanh(mean)`` (evaluation / export).
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, net: NetworkConfig,
+                 log_std_bounds: tuple[float, float] = (-20.0, 2.0), input_mask: np.ndarray | None = None):
+        super().__init__()
+        if not log_std_bounds[0] < log_std_bounds[1]:
+            raise ValueError(f"log_std_bounds must be (low, high) with low < high, got {log_std_bounds}")
+        self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
+        self.trunk = nn.Sequential(*hidden_layers(obs_dim, net, input_mask))
+        self.mean = nn.Linear(net.layers[-1], act_dim)
+        self.log_std = nn.Linear(net.layers[-1], act_dim)
+        self.log_std_min, self.log_std_max = float(log_std_bounds[0]), float(log_std_bounds[1])
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, obs_dim) -> pre-tanh mean (B, act_dim), log_std (B, act_dim) clamped to ``log_std_bounds``."""
+        h = self.trunk(obs)
+        with torch.autocast("cpu", enabled=False):  # the heads in float32 (see float32_output)
+            h = h.float()
+            # A hard clamp (as the paper's "clipped Gaussian"); the bounds are wide enough that it rarely binds.
+            return self.mean(h), self.log_std(h).clamp(self.log_std_min, self.log_std_max)
+
+    def sample(self, obs: torch.Tensor, generator: torch.Generator | None = None
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Reparameterised sample: (action in [-1, 1] (B, act_dim), log pi(action | obs) (B,)).
+
+        log pi(a) = log N(u; mean, std) - sum_i log(1 - tanh(u_i)^2) with u the pre-tanh sample, and
+        log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)) which stays finite where tanh(u) rounds to +-1.
+        """
+        mean, log_std = self(obs)
+        eps = torch.randn(mean.shape, generator=generator, dtype=mean.dtype, device=mean.device)
+        u = mean + log_std.exp() * eps
+        # Gaussian log-density written with eps, not (u - mean) / std: exact even when std ~ exp(-20).
+        gaussian = (-0.5 * eps.square() - log_std - LOG_SQRT_2PI).sum(-1)
+        squash = (2.0 * (LOG_2 - u - F.softplus(-2.0 * u))).sum(-1)
+        return torch.tanh(u), gaussian - squash
+
+    def deterministic(self, obs: torch.Tensor) -> torch.Tensor:
+        """The mode-like action ``tanh(mean)`` in [-1, 1] (B, act_dim)."""
+        mean, _ = self(obs)
+        return torch.tanh(mean)
+
+
+class CategoricalActor(nn.Module):
+    """Discrete policy: obs (B, obs_dim) -> logits (B, n_actions) of a categorical distribution."""
+
+    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig):
+        super().__init__()
+        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
+        self.net = mlp(obs_dim, net, n_actions)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net(obs)
+
+
+# ---------------------------------------------------------------------------------------------------- critics
+class TwinQ(nn.Module):
+    """Two independent Q-networks on concat(obs, action) (clipped double Q, Fujimoto et al. 2018)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, net: NetworkConfig, input_mask: np.ndarray | None = None):
+        super().__init__()
+        self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
+        # input_mask covers the observation; the action is always seen
+        mask = None if input_mask is None else np.concatenate([np.asarray(input_mask).reshape(-1), np.ones(act_dim)])
+        self.q1 = mlp(obs_dim + act_dim, net, 1, mask)
+        self.q2 = mlp(obs_dim + act_dim, net, 1, mask)
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, obs_dim), (B, act_dim) with act in the unit range [-1, 1] -> q1 (B,), q2 (B,)."""
+        x = torch.cat([obs, act], dim=-1)
+        return float32_output(self.q1, x).squeeze(-1), float32_output(self.q2, x).squeeze(-1)
+
+
+class TwinQDiscrete(nn.Module):
+    """Twin Q(s, one_hot(a)) -> scalar for a discrete action set (the paper's meta critic: 272 + 4 inputs).
+
+    ``forward`` evaluates the taken actions (B rows); ``all_actions`` evaluates every action of every state
+    (B * n rows) for the soft value and the policy loss.
+    """
+
+    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig):
+        super().__init__()
+        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
+        self.q1 = mlp(obs_dim + n_actions, net, 1)
+        self.q2 = mlp(obs_dim + n_actions, net, 1)
+        # Not persistent: a constant, it has no place in checkpoints.
+        self.register_buffer("eye", torch.eye(n_actions), persistent=False)
+
+    def forward(self, obs: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """obs (B, obs_dim), action (B,) integer indices or (B, n) one-hot -> q1 (B,), q2 (B,)."""
+        one_hot = self.eye[action] if action.dim() == 1 else action.to(obs.dtype)
+        x = torch.cat([obs, one_hot], dim=-1)
+        return self.q1(x).squeeze(-1), self.q2(x).squeeze(-1)
+
+    def all_actions(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """obs (B, obs_dim) -> q1 (B, n), q2 (B, n): every action of every state in one batched pass."""
+        batch, n = obs.shape[0], self.n_actions
+        x = torch.cat([obs.unsqueeze(1).expand(batch, n, self.obs_dim),
+                       self.eye.to(obs.dtype).unsqueeze(0).expand(batch, n, n)], dim=-1).reshape(batch * n, -1)
+        return self.q1(x).view(batch, n), self.q2(x).view(batch, n)
+
+
+# ---------------------------------------------------------------------------------------------------- actions
+class ActionScaler:
+    """Affine map between the policy's unit box [-1, 1]^d and the environment's box [low, high].
+
+    The SarSearch action box is low = [-1, -1, 0, 0], high = [1, 1, 1, 1] (movement x / y, search intensity,
+    camera zoom). Works on numpy arrays and torch tensors (same type out as in).
+
+    ``margin`` > 0 maps the unit box onto the environment's box widened by ``margin`` x its range on each side,
+    and clips to the environment's box (TrainConfig.action_margin): the policy then reaches a bound of the
+    environment's range (sensor fully on, widest zoom, full speed) short of tanh's saturation, where its
+    gradient still flows, and the actions beyond the bound all fly that bound.
+    """
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, margin: float = 0.0):
+        low = np.asarray(low, dtype=np.float32).reshape(-1)
+        high = np.asarray(high, dtype=np.float32).reshape(-1)
+        if low.shape != high.shape or not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+            raise ValueError(f"action bounds must be finite and of one shape, got {low} / {high}")
+        if not np.all(high > low):
+            raise ValueError(f"action bounds need high > low in every dimension, got {low} / {high}")
+        if not (math.isfinite(margin) and margin >= 0.0):
+            raise ValueError(f"action margin must be a finite number >= 0, got {margin}")
+        self.low, self.high, self.margin = low, high, float(margin)
+        widen = np.float32(margin) * (high - low)
+        self.policy_low = low - widen  # where the unit box's -1 lands
+        self._half_range = (high - low + 2.0 * widen) / 2.0
+        self._low_t, self._high_t = torch.from_numpy(low.copy()), torch.from_numpy(high.copy())
+        self._policy_low_t = torch.from_numpy(self.policy_low.copy())
+        self._half_range_t = torch.from_numpy(self._half_range.copy())
+
+    @property
+    def dim(self) -> int:
+        return int(self.low.shape[0])
+
+    @property
+    def half_range(self) -> np.ndarray:
+        """Half the width of the box the unit box maps onto (the environment's, widened by the margin)."""
+        return self._half_range.copy()
+
+    def to_env(self, a_unit):
+        """[-1, 1] -> [low, high]: ``low' + (a + 1) / 2 * (high' - low')`` over the widened box, clipped."""
+        if isinstance(a_unit, torch.Tensor):
+            action = self._policy_low_t.to(a_unit.dtype) + (a_unit + 1.0) * self._half_range_t.to(a_unit.dtype)
+            return torch.clamp(action, self._low_t.to(a_unit.dtype), self._high_t.to(a_unit.dtype))
+        return np.clip(self.policy_low + (np.asarray(a_unit) + 1.0) * self._half_range, self.low, self.high)
+
+    def to_unit(self, a_env):
+        """[low, high] -> [-1, 1], the inverse of :meth:`to_env` (over the environment's box)."""
+        if isinstance(a_env, torch.Tensor):
+            return (a_env - self._policy_low_t.to(a_env.dtype)) / self._half_range_t.to(a_env.dtype) - 1.0
+        return (np.asarray(a_env) - self.policy_low) / self._half_range - 1.0
+
+    def flown(self, a_unit: torch.Tensor) -> torch.Tensor:
+        """The unit action the environment really flies for ``a_unit``: clipped to the environment's box.
+
+        The critics learn from the buffer's (flown) actions, so the policy's actions go through this before the
+        critics judge them: beyond a bound Q is flat, as it is in the environment. Without a margin: a_unit."""
+        if self.margin == 0.0:
+            return a_unit
+        return self.to_unit(self.to_env(a_unit))
+
+
+# ---------------------------------------------------------------------------------------------------- helpers
+@torch.no_grad()
+def polyak_update(online: list[torch.Tensor], target: list[torch.Tensor], tau: float) -> None:
+    """target <- target + tau * (online - target) for paired parameter lists (one fused foreach call)."""
+    torch._foreach_lerp_(target, online, tau)
+
+
+class PrivateTorchRNG:
+    """A private stream for the *global* torch CPU RNG, swapped in for the duration of a ``with`` block.
+
+    ``nn.Dropout`` cannot take a ``torch.Generator``: it always draws from the global RNG. To keep an agent's
+    dropout masks a function of its own seed (and restorable from a checkpoint) without disturbing the
+    caller's global RNG, the agent keeps its own RNG state here and swaps it in around each update.
+    Not thread-safe (nothing that touches the global torch RNG is).
+    """
+
+    def __init__(self, seed: int):
+        self.state = torch.Generator().manual_seed(int(seed)).get_state()
+        self._outer: torch.Tensor | None = None
+
+    def __enter__(self) -> "PrivateTorchRNG":
+        self._outer = torch.get_rng_state()
+        torch.set_rng_state(self.state)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.state = torch.get_rng_state()
+        torch.set_rng_state(self._outer)
+        self._outer = None
+
+
+def derive_seeds(seed: int, count: int) -> list[int]:
+    """``count`` independent 63-bit seeds from one seed (numpy SeedSequence), one per random stream."""
+    states = np.random.SeedSequence(int(seed)).generate_state(count, dtype=np.uint64)
+    return [int(s) >> 1 for s in states]
+
+
+def as_float_tensor(name: str, value, shape: tuple[int, ...]) -> torch.Tensor:
+    """A float32 tensor from a numpy batch entry, with a strict shape check.
+
+    Strict on purpose: a (B, 1) reward broadcast against (B,) Q-values silently trains on a (B, B) target.
+    """
+    tensor = torch.as_tensor(np.asarray(value, dtype=np.float32))
+    if tuple(tensor.shape) != shape:
+        raise ValueError(f"batch[{name!r}] must have shape {shape}, got {tuple(tensor.shape)}")
+    return tensor
+
+
+class CheckpointedAgent:
+    """``state_dict`` / ``load_state_dict`` shared by SAC and discrete SAC: networks, target critics, optimisers,
+    the entropy temperature and every random stream, so that a resumed run gives bit-identical next updates."""
+
+    _MODULES = ("actor", "critic", "critic_target", "actor_optim", "critic_optim", "alpha_optim")
+
+    def state_dict(self) -> dict:
+        """Everything a resumed run needs (like ``nn.Module.state_dict``, tensors are shared: ``torch.save`` or
+        deep-copy it for a snapshot)."""
+        state = {name: getattr(self, name).state_dict() for name in self._MODULES}
+        state.update(log_alpha=self.log_alpha.detach().clone(), generator=self.generator.get_state(),
+                     dropout_rng=self.dropout_rng.state.clone(), num_updates=self.num_updates)
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        for name in self._MODULES:
+            getattr(self, name).load_state_dict(state[name])
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])  # in place: alpha_optim holds this very tensor
+        self.generator.set_state(state["generator"])
+        self.dropout_rng.state = state["dropout_rng"].clone()
+        self.num_updates = int(state["num_updates"])

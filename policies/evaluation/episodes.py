@@ -1,0 +1,145 @@
+"""Evaluating a search policy (learned or scripted) on a scenario split, with the paper's metrics.
+
+Each of the first ``episodes`` scenarios of the split is flown once (episode seed i -> scenario i), all in one
+vectorised batch, deterministically. Metrics: success rate with a Wilson 95 % interval, cumulative extrinsic
+reward, coverage ratio, episode length, sub-goal reachability (HRL: share of goal segments in which the drone
+came within the reach radius of the goal's point), time to first detection of the victim, and the collision and
+out-of-bounds rates.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from missions.goals import RETURN_TO_BASE
+from missions.mission import FlightSettings
+from policies.env.core import SarSearchBatch, SarSearchConfig, make_batch
+from policies.evaluation.stats import quantiles, wilson_interval
+
+ActFn = Callable[[SarSearchBatch], np.ndarray]
+END_KEYS = ("success", "collision", "out_of_bounds", "ran_dry", "returned")
+"""How an episode can end (besides the step limit); ran_dry and returned are SarSearch-v1's."""
+FOUND_BY_S = (120, 240, 360, 480, 600, 720)
+"""Times (s of flight) at which the evaluation reports the share of episodes already successful, P(found by t)."""
+GoalFn = Callable[[np.ndarray], np.ndarray]
+
+
+def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None = None,
+                 return_to_base_ends_search: bool = False) -> dict[str, np.ndarray]:
+    """Fly every slot of ``core`` to the end of its current episode; per-episode outcome arrays.
+
+    ``act(core)`` returns (N, 4) actions; ``choose_goals(meta_obs)`` (HRL) returns goal indices for the rows it
+    is given, called every K steps. ``return_to_base_ends_search``: the mission runner's rule (a ReturnToBase
+    decision ends the search once the drone has left home (SarSearch-v1; on v0 always): the vehicle is sent home
+    with RTL) instead of training's (ReturnToBase is a sub-goal
+    like the others, flown by the low level until the next decision); used to compare flight with the
+    environment on equal terms (benchmarks/sim_to_sitl.py).
+    """
+    n, k = core.n, core.flight.subgoal_interval
+    done = np.zeros(n, dtype=bool)
+    record = {key: np.zeros(n, dtype=bool) for key in END_KEYS}
+    record.update(length=np.zeros(n, dtype=np.int64), first_detection=np.full(n, -1, dtype=np.int64),
+                  episode_return=np.zeros(n), coverage=np.zeros(n))
+    segments, reached_segments = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    reached = np.zeros(n, dtype=bool)
+    while not done.all():
+        if choose_goals is not None:
+            decide = (core.steps % k == 0) & ~done
+            if decide.any():
+                had_goal = decide & (core.steps > 0)
+                segments += had_goal
+                reached_segments += had_goal & reached
+                reached[decide] = False
+                goals = np.zeros(n, dtype=np.int64)
+                goals[decide] = choose_goals(core.meta_observation[decide])
+                core.set_goals(goals, decide)
+                if return_to_base_ends_search:
+                    gave_up = decide & (goals == RETURN_TO_BASE) & getattr(core, "left_home", True)
+                    _record_end(record, gave_up, core.steps, core.first_detection_step, core.episode_return,
+                                core.coverage_ratio)
+                    segments += gave_up  # the ReturnToBase segment counts, unreached, as in flight
+                    done |= gave_up
+                    if done.all():
+                        break
+        _, _, terminated, truncated, info = core.step(act(core))
+        if choose_goals is not None:
+            reached |= np.hypot(*(info["position"] - info["goal_point"]).T) <= core.flight.reach_radius_m
+        ended = (terminated | truncated) & ~done
+        for key in END_KEYS:
+            if key in info:  # SarSearch-v0 has neither an endurance nor a home to return to
+                record[key][ended] = info[key][ended]
+        _record_end(record, ended, info["steps"], info["first_detection_step"], info["episode_return"],
+                    info["coverage_ratio"])
+        if choose_goals is not None:
+            segments += ended
+            reached_segments += ended & reached
+        done |= ended
+    record["subgoal_segments"], record["subgoals_reached"] = segments, reached_segments
+    return record
+
+
+def _record_end(record: dict[str, np.ndarray], ended: np.ndarray, steps: np.ndarray, first_detection: np.ndarray,
+                episode_return: np.ndarray, coverage: np.ndarray) -> None:
+    record["length"][ended] = steps[ended]
+    record["first_detection"][ended] = first_detection[ended]
+    record["episode_return"][ended] = episode_return[ended]
+    record["coverage"][ended] = coverage[ended]
+
+
+def found_by(success: np.ndarray, success_time_s: np.ndarray, times_s=FOUND_BY_S) -> dict[str, float]:
+    """P(found by t): the share of all episodes that had succeeded by each time (not conditioned on success)."""
+    return {f"{t:g}s": float((success & (success_time_s <= t)).mean()) for t in times_s}
+
+
+def summarise(record: dict[str, np.ndarray], step_period_s: float = 1.0) -> dict:
+    """The paper's metrics from :func:`run_episodes`' arrays (``step_period_s`` converts steps to time)."""
+    episodes = len(record["success"])
+    successes = int(record["success"].sum())
+    for key in END_KEYS:  # records written before SarSearch-v1 had no such ends
+        record.setdefault(key, np.zeros(episodes, dtype=bool))
+    low, high = wilson_interval(successes, episodes)
+    detected = record["first_detection"] >= 0
+    segments = int(record["subgoal_segments"].sum())
+    return {
+        "episodes": episodes, "success_rate": successes / episodes, "success_ci95": [low, high],
+        "reward_mean": float(record["episode_return"].mean()), "reward_std": float(record["episode_return"].std()),
+        "coverage_mean": float(record["coverage"].mean()), "coverage_std": float(record["coverage"].std()),
+        "length_mean": float(record["length"].mean()), "length_std": float(record["length"].std()),
+        "collision_rate": float(record["collision"].mean()), "out_of_bounds_rate": float(record["out_of_bounds"].mean()),
+        "ran_dry_rate": float(record["ran_dry"].mean()), "returned_rate": float(record["returned"].mean()),
+        "found_by": found_by(record["success"], record["length"] * step_period_s),
+        "subgoal_reachability": (float(record["subgoals_reached"].sum()) / segments) if segments else None,
+        "detection_rate": float(detected.mean()),
+        "time_to_first_detection": quantiles(record["first_detection"][detected]),
+        "steps_to_success": quantiles(record["length"][record["success"]]),
+        "per_episode": {"success": record["success"].astype(int).tolist(),
+                        "ran_dry": record["ran_dry"].astype(int).tolist(),
+                        "reward": np.round(record["episode_return"], 3).tolist(),
+                        "length": record["length"].tolist(), "first_detection": record["first_detection"].tolist()},
+    }
+
+
+def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_conditioned: bool,
+                  slots: range | None = None, stream: int = 0, **environment) -> SarSearchBatch:
+    """One slot per scenario 0..episodes-1 of ``split`` (or only those in ``slots``, a part of that range:
+    scenario i is flown with episode seed i whichever batch it is in, so parts concatenate to the whole).
+    ``stream`` k > 0 flies the same scenarios with other detection draws (episode seed i + k * episodes, which
+    picks scenario i of the pool of ``episodes``): the runs of a scripted searcher. ``environment``: further
+    ``SarSearchConfig`` fields (``task``, ``generator``, ``scenarios``: with a fixed list of scenarios, episode i
+    flies scenario i of it)."""
+    config = SarSearchConfig(split=split, flight=flight, pool_size=max(episodes, 1), goal_conditioned=goal_conditioned,
+                             **environment)
+    slots = range(episodes) if slots is None else slots
+    return make_batch(config, [i + stream * episodes for i in slots])
+
+
+def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None,
+                        environment: dict | None = None, constant_goal: int | None = None) -> dict:
+    """The paper's metrics of a trained run's deterministic policy on ``split`` (or on ``environment``'s scenarios:
+    ``SarSearchConfig`` fields ``generator`` or ``scenarios``); with ``pool`` (an ``simulation.worker_pool.PoolConfig``)
+    the episodes are split across workers, with identical results. ``constant_goal``: HRL-SAC's learned low level
+    flying that goal at every decision."""
+    from policies.evaluation.parallel import evaluate_in_chunks
+
+    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal)

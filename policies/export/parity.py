@@ -1,0 +1,77 @@
+"""Parity of an exported artifact with the eager policy it came from, on observations recorded in flight.
+
+An artifact is only a faithful copy if it acts like the checkpoint on the observations it will meet, not on
+random vectors (whose coverage and one-hot blocks look like nothing the policy saw). So the observations are
+recorded from the environment: every slot of a batch flies a validation scenario, half of them with the
+policy's own actions (the states it visits) and half with uniformly random ones (states it might be pushed
+into), episodes restarting as they end; HRL-SAC slots take the meta-controller's goals every K steps.
+Agreement means actions within ``ACTION_TOLERANCE`` (float32 rounding) and identical goals.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from autonomy.observation import META_OBS_DIM, NO_GOAL
+from autonomy.policy import Policy
+from policies.checkpoint import CheckpointPolicy
+from policies.env.core import ACTION_HIGH, ACTION_LOW
+from policies.evaluation.episodes import episode_batch
+
+PARITY_OBSERVATIONS = 10_000
+ACTION_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Parity:
+    """How far the artifact is from the eager policy on ``observations`` recorded observations."""
+
+    observations: int
+    max_action_difference: float
+    goal_mismatches: int
+
+    @property
+    def ok(self) -> bool:
+        return self.max_action_difference <= ACTION_TOLERANCE and self.goal_mismatches == 0
+
+    def summary(self) -> str:
+        return (f"{self.observations:,} observations, max |action difference| {self.max_action_difference:.1e} "
+                f"(tolerance {ACTION_TOLERANCE:.0e}), {self.goal_mismatches} different goals")
+
+
+def check_parity(policy: CheckpointPolicy, artifact: Policy, obs: np.ndarray) -> Parity:
+    """Compare actions and goals of the eager ``policy`` and the loaded ``artifact`` on the same batch."""
+    difference = np.abs(policy.act(obs).astype(np.float64) - artifact.act(obs))
+    # NaN anywhere (in either) is a failure, not something max() may skip.
+    max_difference = float(difference.max()) if np.isfinite(difference).all() else float("inf")
+    meta_obs = obs[:, :META_OBS_DIM]
+    expected = policy.choose_goals(meta_obs) if policy.hierarchical else np.full(len(obs), NO_GOAL)
+    mismatches = int(np.count_nonzero(expected != artifact.select_goal(meta_obs)))
+    return Parity(len(obs), max_difference, mismatches)
+
+
+def record_observations(policy: CheckpointPolicy, count: int = PARITY_OBSERVATIONS, envs: int = 100,
+                        seed: int = 0) -> np.ndarray:
+    """(count, 288) float32 observations met by flying ``policy`` (and random actions) on the val split."""
+    core = episode_batch("val", envs, policy.config.flight, goal_conditioned=policy.hierarchical,
+                         task=policy.config.task, action_frame=policy.config.action_frame)
+    rng = np.random.default_rng(seed)
+    random_slots = np.arange(envs) % 2 == 1
+    k, next_episode, recorded = policy.config.flight.subgoal_interval, envs, []
+    while len(recorded) * envs < count:
+        if policy.hierarchical:
+            decide = core.steps % k == 0
+            if decide.any():
+                goals = np.zeros(envs, dtype=np.int64)
+                goals[decide] = policy.choose_goals(core.meta_observation[decide])
+                core.set_goals(goals, decide)
+        recorded.append(core.obs.copy())
+        actions = policy.act(core.obs)
+        actions[random_slots] = rng.uniform(ACTION_LOW, ACTION_HIGH, size=(int(random_slots.sum()), 4))
+        _, _, terminated, truncated, _ = core.step(actions)
+        ended = np.flatnonzero(terminated | truncated)
+        if len(ended):
+            core.reset(ended, np.arange(next_episode, next_episode + len(ended)))
+            next_episode += len(ended)
+    return np.concatenate(recorded)[:count]
