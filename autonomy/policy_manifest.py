@@ -17,12 +17,7 @@ import json
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from autonomy.observation import (
-    META_OBS_DIM,
-    OBS_DIM,
-    OBSERVATION_LAYOUT_VERSION,
-    layout_description,
-)
+from autonomy.observation import META_OBS_DIM, OBS_DIM, OBSERVATION_LAYOUT_VERSION, layout_description
 
 FORMAT_VERSION = 1
 FORMATS = ("torchscript", "torch-export")

@@ -28,7 +28,7 @@ import torch
 from common import results_file, summarise, write_report
 
 from policies.config import TrainConfig
-from policies.evaluation.episodes import evaluate_checkpoint
+from policies.evaluation.parallel import evaluate_checkpoint
 from policies.evaluation.parallel import quick_success_rate
 from policies.training.trainer import Trainer
 from simulation.worker_pool import PoolConfig, run_tasks

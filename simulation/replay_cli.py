@@ -11,11 +11,7 @@ import time
 from pathlib import Path
 
 from autonomy.mission_cli import mission_parser, prepare_mission
-from simulation.worker_pool import (
-    WorkerPoolError,
-    add_pool_arguments,
-    pool_from_arguments,
-)
+from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 REPLAY_SUMMARY = "fly the mission in the simulated vehicle, in lockstep (deterministic)"
 
@@ -42,9 +38,7 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
     args.faults = None
     if args.link_faults:
-        from sitl_bridge.faults import (
-            parse_link_faults,  # a real flight has the real link's faults
-        )
+        from sitl_bridge.faults import parse_link_faults  # a real flight has the real link's faults
 
         args.faults = parse_link_faults(args.link_faults)
     try:

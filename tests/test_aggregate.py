@@ -4,12 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from policies.evaluation.aggregate import (
-    aggregate,
-    interquartile_mean,
-    score_matrix,
-    stratified_bootstrap_ci,
-)
+from policies.evaluation.aggregate import aggregate, interquartile_mean, score_matrix, stratified_bootstrap_ci
 
 
 def test_interquartile_mean_is_the_trimmed_mean_with_fractional_cut_offs():

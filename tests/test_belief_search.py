@@ -233,7 +233,8 @@ class ScriptedArtifact:
 def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_frame):
     from autonomy.search_pilot import SearchPilot
     from missions.mission import Mission
-    from policies.env.core import SarSearchConfig, make_batch
+    from policies.env.core import SarSearchConfig
+    from policies.env.tasks import make_batch
 
     scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=700.0,
                         targets=(Target("person", 330.0, 80.0, primary=True), Target("person", 250.0, 20.0),
@@ -307,7 +308,8 @@ def test_return_to_base_ends_the_flown_search_only_once_the_drone_has_left_home(
 
 def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_does():
     from missions.goals import RETURN_TO_BASE
-    from policies.env.core import SarSearchConfig, make_batch
+    from policies.env.core import SarSearchConfig
+    from policies.env.tasks import make_batch
     from policies.evaluation.episodes import run_episodes
 
     scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,

@@ -15,23 +15,8 @@ import policies  # noqa: F401  (registers SarSearch-v0)
 from autonomy.observation import LAYOUT_V3, TARGET_OFFSET_SCALE_M
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
-from missions.scenario import (
-    Conditions,
-    Obstacle,
-    Scenario,
-    SearchArea,
-    SeaState,
-    Target,
-    TimeOfDay,
-    Weather,
-)
-from policies.env.core import (
-    REWARD_BOUNDARY,
-    REWARD_COLLISION,
-    REWARD_STEP,
-    REWARD_TARGET,
-    SarSearchConfig,
-)
+from missions.scenario import Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay, Weather
+from policies.env.core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_STEP, REWARD_TARGET, SarSearchConfig
 from policies.env.gym_env import SarSearchEnv
 from policies.env.vector import SarSearchVectorEnv
 

@@ -25,19 +25,9 @@ from missions.mission import FlightSettings
 from policies.checkpoint import CheckpointPolicy
 from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
-from policies.export.artifact import (
-    ParityError,
-    artifact_bytes,
-    build_manifest,
-    export_policy,
-)
+from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
 from policies.export.module import policy_module
-from policies.export.parity import (
-    ACTION_TOLERANCE,
-    Parity,
-    check_parity,
-    record_observations,
-)
+from policies.export.parity import ACTION_TOLERANCE, Parity, check_parity, record_observations
 from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")

@@ -22,7 +22,8 @@ from missions.mission import FlightSettings, Mission
 from missions.mission_file import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
-from policies.env.core import SarSearchConfig, make_batch
+from policies.env.core import SarSearchConfig
+from policies.env.tasks import make_batch
 from policies.evaluation.episodes import run_episodes, summarise
 from policies.training.trainer import Trainer
 

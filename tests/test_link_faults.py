@@ -27,13 +27,7 @@ from simulation import mission_replay as replay_module
 from simulation.flight_outcome import FlyawayLimits
 from simulation.mission_replay import airframe_for, replay_mission, start_point
 from sitl_bridge import cli as sitl_cli
-from sitl_bridge.faults import (
-    FaultModel,
-    FaultyLink,
-    LinkFaults,
-    Outage,
-    parse_link_faults,
-)
+from sitl_bridge.faults import FaultModel, FaultyLink, LinkFaults, Outage, parse_link_faults
 from sitl_bridge.link import UdpLink, memory_link_pair
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.vehicle import VehicleConfig

@@ -10,11 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from policies.agents.normalizer import RunningMeanStd
-from policies.agents.prioritized_replay import (
-    PrioritizedReplayBuffer,
-    SumTree,
-    linear_beta,
-)
+from policies.agents.prioritized_replay import PrioritizedReplayBuffer, SumTree, linear_beta
 
 SCALAR_FIELDS = {"value": ((), np.float32)}
 TRANSITION_FIELDS = {"obs": ((6,), np.float32), "action": ((2,), np.float32), "reward": ((), np.float32),

@@ -14,13 +14,7 @@ import math
 import pytest
 import torch
 from pymavlink.dialects.v20 import common as mavlink
-from test_runner import (
-    ours,
-    read_tlog,
-    searched_to_its_own_end,
-    small_mission,
-    with_actions,
-)
+from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
 
 from autonomy.policy import Policy, load_policy
 from missions.goals import TRACK_OBJECT

@@ -26,15 +26,8 @@ from hypothesis import strategies as st
 from missions.mission import FlightSettings, Mission
 from missions.mission_file import load_mission, save_mission
 from missions.scenario import Scenario, SearchArea, Target
-from policies.evaluation.episodes import evaluate_checkpoint
-from policies.reports.sweep_table import (
-    DONE,
-    FAILED,
-    SKIPPED,
-    ProgressTable,
-    RunStatus,
-    render,
-)
+from policies.evaluation.parallel import evaluate_checkpoint
+from policies.reports.sweep_table import DONE, FAILED, SKIPPED, ProgressTable, RunStatus, render
 from policies.training.sweep import SWEEP_REPORT, check_run_folders, run_sweep
 from policies.training.sweep_config import SweepFileError, load_sweep, sweep_from_dict
 from simulation.parallel_replay import ReplayEpisode, replay_episodes

@@ -18,7 +18,7 @@ from missions.mission import FlightSettings
 from missions.search import footprint_half_width_m
 from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
-from policies.evaluation.episodes import evaluate_checkpoint
+from policies.evaluation.parallel import evaluate_checkpoint
 from policies.evaluation.parallel import quick_success_rate
 from policies.training.trainer import Trainer, cross_track_m
 

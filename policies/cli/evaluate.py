@@ -15,11 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from simulation.worker_pool import (
-    WorkerPoolError,
-    add_pool_arguments,
-    pool_from_arguments,
-)
+from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 
 def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
@@ -40,7 +36,7 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     if args.episodes is not None and args.episodes < 1:
         print(f"{prog}: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
         return 2
-    from policies.evaluation.episodes import evaluate_checkpoint
+    from policies.evaluation.parallel import evaluate_checkpoint
 
     try:
         environment, name, count = user_scenarios(args.missions, args.generator, args.run)

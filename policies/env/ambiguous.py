@@ -27,13 +27,7 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V4
 from missions.belief_search import CONFIRMED, BeliefSearchState
-from policies.env.core import (
-    REWARD_BOUNDARY,
-    REWARD_COLLISION,
-    REWARD_TARGET,
-    FlownSearch,
-    SarSearchConfig,
-)
+from policies.env.core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_TARGET, FlownSearch, SarSearchConfig
 
 REWARD_RAN_DRY = -50.0
 REWARD_RETURNED = 20.0

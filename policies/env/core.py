@@ -22,7 +22,6 @@ One step is one policy decision (``FlightSettings.step_period_s``, 1 s by defaul
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -287,26 +286,3 @@ class SarSearchBatch(FlownSearch, SearchState):
                 "first_detection_chance": out.first_detection_chance,
                 "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info
-
-
-def batch_class(task: str) -> type:
-    """The environment core of a task version."""
-    if task == "SarSearch-v1":
-        from policies.env.ambiguous import (
-            AmbiguousSearchBatch,  # it builds on this module
-        )
-
-        return AmbiguousSearchBatch
-    return SarSearchBatch
-
-
-def new_batch(config: SarSearchConfig, num_envs: int):
-    """``num_envs`` environments of ``config.task`` (not reset yet)."""
-    return batch_class(config.task)(config, num_envs)
-
-
-def make_batch(config: SarSearchConfig, seeds: Sequence[int]):
-    """A batch with every slot reset to its seed."""
-    batch = new_batch(config, len(seeds))
-    batch.reset(np.arange(len(seeds)), np.asarray(seeds, dtype=np.uint64))
-    return batch

@@ -12,13 +12,8 @@ import gymnasium as gym
 import numpy as np
 
 from missions.render import render_search
-from policies.env.core import (
-    ACTION_HIGH,
-    ACTION_LOW,
-    SarSearchConfig,
-    new_batch,
-    next_episode_seed,
-)
+from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig, next_episode_seed
+from policies.env.tasks import new_batch
 
 
 class SarSearchEnv(gym.Env):

@@ -15,13 +15,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from policies.env.core import (
-    ACTION_HIGH,
-    ACTION_LOW,
-    SarSearchConfig,
-    new_batch,
-    next_episode_seed,
-)
+from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig, next_episode_seed
+from policies.env.tasks import new_batch
 
 
 class SarSearchVectorEnv(VectorEnv):

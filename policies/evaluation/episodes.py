@@ -14,7 +14,8 @@ import numpy as np
 
 from missions.goals import RETURN_TO_BASE
 from missions.mission import FlightSettings
-from policies.env.core import SarSearchBatch, SarSearchConfig, make_batch
+from policies.env.core import SarSearchBatch, SarSearchConfig
+from policies.env.tasks import make_batch
 from policies.evaluation.stats import quantiles, wilson_interval
 
 ActFn = Callable[[SarSearchBatch], np.ndarray]
@@ -132,14 +133,3 @@ def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_condit
                              **environment)
     slots = range(episodes) if slots is None else slots
     return make_batch(config, [i + stream * episodes for i in slots])
-
-
-def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None,
-                        environment: dict | None = None, constant_goal: int | None = None) -> dict:
-    """The paper's metrics of a trained run's deterministic policy on ``split`` (or on ``environment``'s scenarios:
-    ``SarSearchConfig`` fields ``generator`` or ``scenarios``); with ``pool`` (an ``simulation.worker_pool.PoolConfig``)
-    the episodes are split across workers, with identical results. ``constant_goal``: HRL-SAC's learned low level
-    flying that goal at every decision."""
-    from policies.evaluation.parallel import evaluate_in_chunks
-
-    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal)

@@ -122,3 +122,12 @@ def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None 
             "trained_steps": int(policy_state["step"]), "split": split, "task": config.task,
             "max_steps": config.flight.max_steps, "constant_goal": constant_goal,
             **summarise(record, config.flight.step_period_s)}
+
+
+def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None,
+                        environment: dict | None = None, constant_goal: int | None = None) -> dict:
+    """The paper's metrics of a trained run's deterministic policy on ``split`` (or on ``environment``'s scenarios:
+    ``SarSearchConfig`` fields ``generator`` or ``scenarios``); with ``pool`` (an ``simulation.worker_pool.PoolConfig``)
+    the episodes are split across workers, with identical results. ``constant_goal``: HRL-SAC's learned low level
+    flying that goal at every decision."""
+    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal)

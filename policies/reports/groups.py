@@ -23,7 +23,8 @@ from missions.goals import GOAL_NAMES
 from policies.evaluation.aggregate import STRATA, aggregate, strata_of
 from policies.evaluation.episodes import FOUND_BY_S, episode_batch
 from policies.evaluation.stats import group_stats, intervals_overlap
-from policies.reports.compare import CompareError, Run
+from policies.reports.figures import colour, new_figure, save_figure
+from policies.reports.runs import CompareError, Run
 
 SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bounded, repeated)",
                    "parallel_track": "Parallel track (bounded, repeated)", "greedy_bayes": "Greedy Bayesian"}
@@ -137,9 +138,7 @@ def render_task_table(summary: dict) -> list[str]:
 
 def plot_found_by(rows: list[dict], path: Path, times=FOUND_BY_S) -> None:
     """P(found by t) per row, from each run's per-episode successes and lengths (seconds = steps x period)."""
-    from policies.reports.markdown import _colour, _figure, _save_figure
-
-    fig = _figure(9, 5.5)
+    fig = new_figure(9, 5.5)
     ax = fig.subplots()
     grid = np.arange(0, max(times) + 181, 10)
     for i, row in enumerate(rows):
@@ -150,14 +149,14 @@ def plot_found_by(rows: list[dict], path: Path, times=FOUND_BY_S) -> None:
             success = np.asarray(m["per_episode"]["success"], dtype=bool)
             length = np.asarray(m["per_episode"]["length"], dtype=np.float64)
             curves.append([(success & (length <= t)).mean() for t in grid])
-        ax.plot(grid, np.mean(curves, axis=0), label=row["label"], color=_colour(i),
+        ax.plot(grid, np.mean(curves, axis=0), label=row["label"], color=colour(i),
                 linestyle="--" if row.get("kind") == "scripted" else ":" if row.get("kind") == "constant goal" else "-")
     ax.set_xlabel("flight time t (s)")
     ax.set_ylabel("P(victim confirmed and reached by t)")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
-    _save_figure(fig, path)
+    save_figure(fig, path)
 
 
 def progress_stream(progress) -> TextIO | None:

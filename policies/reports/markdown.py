@@ -4,19 +4,13 @@ The numbers come from :mod:`policies.reports.compare`; this module only renders 
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from policies.reports.compare import (
-    BASELINE_LABELS,
-    CURVE_COLUMNS,
-    Run,
-    intervals_overlap,
-    label_of,
-    train_command,
-)
+from policies.evaluation.stats import intervals_overlap
+from policies.reports.figures import colour, new_figure, save_figure
+from policies.reports.runs import BASELINE_LABELS, CURVE_COLUMNS, Run, label_of, train_command
 
 
 def _pct(x: float | None) -> str:
@@ -185,28 +179,6 @@ def render_report(summary: dict, groups: dict[tuple[str, str], list[Run]], fligh
     return "\n".join(out) + "\n"
 
 
-# ---------------------------------------------------------------------------------------------- figures
-def _figure(width: float, height: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width, height), dpi=100)
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save_figure(fig, path: Path) -> None:
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, format="png")
-    os.replace(tmp, path)
-
-
-def _colour(index: int):
-    import matplotlib
-
-    return matplotlib.colormaps["tab10"](index % 10)
-
-
 def _aligned(logs: list[dict], column: str, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean, min and max across runs of one logged column, interpolated onto ``grid`` (NaN where no run has data)."""
     curves = np.full((len(logs), len(grid)), np.nan)
@@ -227,7 +199,7 @@ def plot_training_curves(groups: dict[tuple[str, str], list[Run]], summary: dict
     """Logged training success, return, coverage and length per group: mean across seeds, min–max band."""
     from matplotlib.ticker import FuncFormatter
 
-    fig = _figure(13, 9)
+    fig = new_figure(13, 9)
     axes = fig.subplots(2, 2).ravel()
     plotted = False
     for index, (key, members) in enumerate(groups.items()):
@@ -238,10 +210,10 @@ def plot_training_curves(groups: dict[tuple[str, str], list[Run]], summary: dict
         grid = np.unique(np.concatenate([log["step"][log["step"] <= end] for log in logs]))
         for ax, (column, _) in zip(axes, CURVE_COLUMNS):
             mean, low, high = _aligned(logs, column, grid)
-            ax.plot(grid, mean, color=_colour(index), linewidth=2,
+            ax.plot(grid, mean, color=colour(index), linewidth=2,
                     label=f"{label_of(key)}, {len(logs)} seed{'s' if len(logs) > 1 else ''} (train)")
             if len(logs) > 1:
-                ax.fill_between(grid, low, high, color=_colour(index), alpha=0.2, linewidth=0)
+                ax.fill_between(grid, low, high, color=colour(index), alpha=0.2, linewidth=0)
         plotted = True
     styles = (":", "--", "-.")
     for i, row in enumerate(summary["baselines"]):
@@ -265,21 +237,21 @@ def plot_training_curves(groups: dict[tuple[str, str], list[Run]], summary: dict
     fig.suptitle("Training curves (rolling mean over the last 100 training episodes; line = mean across seeds, "
                  "band = min–max)", fontsize=12)
     fig.tight_layout(rect=(0, 0.1, 1, 0.96))
-    _save_figure(fig, path)
+    save_figure(fig, path)
 
 
 def plot_boxplots(groups: dict[tuple[str, str], list[Run]], baselines: dict[str, dict], summary: dict,
                   path: Path) -> None:
     """Box plots of per-episode reward and length, and of per-seed success, per group and baseline."""
     labels = [label_of(key) for key in groups] + [BASELINE_LABELS.get(n, n) for n in baselines]
-    colours = [_colour(i) for i in range(len(groups))] + ["0.75"] * len(baselines)
+    colours = [colour(i) for i in range(len(groups))] + ["0.75"] * len(baselines)
     sources = [[r.metrics for r in members] for members in groups.values()] + [[m] for m in baselines.values()]
 
     def per_episode(name: str) -> list[np.ndarray]:
         return [np.concatenate([np.asarray((m.get("per_episode") or {}).get(name, []), dtype=np.float64)
                                 for m in metrics]) for metrics in sources]
 
-    fig = _figure(max(12, 2.2 * len(labels) * 1.5), 6)
+    fig = new_figure(max(12, 2.2 * len(labels) * 1.5), 6)
     axes = fig.subplots(1, 3)
     positions = np.arange(1, len(labels) + 1)
     panels = ((per_episode("reward"), f"Reward per {summary['split']} episode", "cumulative extrinsic reward"),
@@ -319,4 +291,4 @@ def plot_boxplots(groups: dict[tuple[str, str], list[Run]], baselines: dict[str,
     fig.suptitle(f"{summary['split'].capitalize()} split, {summary['episodes']} episodes per seed "
                  f"(scenarios 0–{summary['episodes'] - 1})", fontsize=12)
     fig.tight_layout(rect=(0, 0, 1, 0.95))
-    _save_figure(fig, path)
+    save_figure(fig, path)

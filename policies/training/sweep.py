@@ -26,15 +26,7 @@ from typing import Callable
 
 from autonomy.recorder import write_json_atomic
 from policies.checkpoint import CHECKPOINT
-from policies.reports.sweep_table import (
-    DONE,
-    FAILED,
-    PENDING,
-    RUNNING,
-    SKIPPED,
-    ProgressTable,
-    RunStatus,
-)
+from policies.reports.sweep_table import DONE, FAILED, PENDING, RUNNING, SKIPPED, ProgressTable, RunStatus
 from policies.training.sweep_config import RunSpec, SweepConfig
 from simulation.worker_pool import connect_ray, limit_threads, ray_cpus
 

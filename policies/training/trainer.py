@@ -47,13 +47,7 @@ from policies.agents.n_step import NStepReturns
 from policies.agents.normalizer import RunningMeanStd
 from policies.agents.prioritized_replay import PrioritizedReplayBuffer, linear_beta
 from policies.agents.sac import SAC
-from policies.checkpoint import (
-    CHECKPOINT,
-    CheckpointPolicy,
-    atomic_torch_save,
-    load_checkpoint_state,
-    load_environment,
-)
+from policies.checkpoint import CHECKPOINT, CheckpointPolicy, atomic_torch_save, load_checkpoint_state, load_environment
 from policies.config import TrainConfig
 from policies.env.ambiguous import REWARD_RETURNED
 from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
