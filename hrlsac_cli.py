@@ -36,6 +36,9 @@ GROUPS: dict[str, dict[str, tuple[str, str]]] = {
 }
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"
+TRAIN_EXTRA_MODULES = {"gymnasium": "gymnasium", "cv2": "opencv-python-headless", "matplotlib": "matplotlib",
+                       "tensorboard": "tensorboard"}
+"""Modules of the "train" extra, which an on-board install (``pip install hrlsac``) leaves out."""
 TRACEBACK_ENV = "HRLSAC_TRACEBACK"
 """Set to 1 to see the Python traceback of an unexpected error instead of its one-line summary."""
 
@@ -101,6 +104,10 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes
         return 141
     except Exception as exc:  # what a command did not turn into its own error: one line, the traceback on request
+        if isinstance(exc, ModuleNotFoundError) and exc.name in TRAIN_EXTRA_MODULES:
+            print(f"{prog}: error: this command needs {TRAIN_EXTRA_MODULES[exc.name]}, which an on-board install "
+                  "leaves out: pip install 'hrlsac[train]'", file=sys.stderr)
+            return 2
         if os.environ.get(TRACEBACK_ENV, "") not in ("", "0"):
             raise
         lines = str(exc).strip().splitlines()

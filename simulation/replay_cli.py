@@ -11,6 +11,10 @@ import time
 from pathlib import Path
 
 from autonomy.mission_cli import mission_parser, prepare_mission
+# mission_replay at the top, though only the workers use it: on an on-board install (no OpenCV for the replay's
+# pictures) the command then says at once which extra it needs, before it reads any file.
+from simulation import mission_replay  # noqa: F401
+from simulation.parallel_replay import ReplayEpisode, replay_episodes
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 REPLAY_SUMMARY = "fly the mission in the simulated vehicle, in lockstep (deterministic)"
@@ -48,8 +52,6 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
 
 
 def _replay(mission, policy, args, out: Path) -> int:
-    from simulation.parallel_replay import ReplayEpisode, replay_episodes
-
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
     options = dict(signing_key=args.key, link_faults=args.faults)
     episodes = [ReplayEpisode(mission, args.policy, args.seed + episode,

@@ -1,0 +1,80 @@
+"""The on-board install: ``pip install hrlsac`` (no extras) into a clean virtual environment gives a runtime that
+loads and checks a policy artifact and flies a mission against a MAVLink vehicle, without gymnasium, OpenCV,
+tensorboard or matplotlib; the learning commands say which extra they need.
+
+matplotlib is still *installed* there: filterpy (the estimator's Kalman filter) declares it as a dependency,
+though nothing on the runtime's path imports it; the test checks that it is never imported.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from test_runner import ALL_STATES, fly_against_sitl_process
+
+ROOT = Path(__file__).resolve().parents[1]
+PRETRAINED = ROOT / "policies" / "pretrained" / "hrl-sac.pt"
+LEFT_OUT = ("gymnasium", "cv2", "tensorboard")
+NEVER_IMPORTED = ("gymnasium", "cv2", "tensorboard", "matplotlib", "policies", "sitl_bridge", "simulation")
+
+pytestmark = pytest.mark.slow
+
+
+def pip(python: Path, *args: str) -> None:
+    subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", *args],
+                   check=True, capture_output=True, text=True, timeout=900)
+
+
+@pytest.fixture(scope="module")
+def onboard(tmp_path_factory) -> Path:
+    """The bin folder of a fresh venv holding torch (the CPU build the project pins) and ``pip install ROOT``."""
+    venv = tmp_path_factory.mktemp("onboard") / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    python = venv / "bin" / "python"
+    pip(python, "torch==2.13.0")
+    pip(python, str(ROOT))
+    return venv / "bin"
+
+
+def test_the_training_extra_is_not_installed(onboard):
+    found = subprocess.run([str(onboard / "python"), "-c", "import importlib.util, json; print(json.dumps("
+                            f"{{m: importlib.util.find_spec(m) is not None for m in {list(LEFT_OUT)!r}}}))"],
+                           capture_output=True, text=True, check=True, cwd=onboard)
+    assert json.loads(found.stdout) == {module: False for module in LEFT_OUT}
+
+
+def test_the_runtime_loads_a_policy_and_imports_nothing_of_training_or_the_simulator(onboard):
+    info = subprocess.run([str(onboard / "hrlsac"), "policy", "info", str(PRETRAINED)], capture_output=True,
+                          text=True, timeout=300, cwd=onboard)
+    assert info.returncode == 0, info.stderr
+    assert "hrl-sac" in info.stdout.lower()
+    script = ("import sys, json, hrlsac_cli, autonomy.mission_cli, autonomy.runner, autonomy.mavsdk_link\n"
+              "from autonomy.policy import load_policy\n"
+              f"policy = load_policy({str(PRETRAINED)!r})\n"
+              f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & {set(NEVER_IMPORTED)!r})))")
+    loaded = subprocess.run([str(onboard / "python"), "-c", script], capture_output=True, text=True, timeout=300,
+                            cwd=onboard)
+    assert loaded.returncode == 0, loaded.stderr
+    assert json.loads(loaded.stdout.strip().splitlines()[-1]) == []
+
+
+@pytest.mark.parametrize("command", [["train", "--out", "run"], ["mission", "replay", "m.yaml", "--policy", "p.pt"]])
+def test_a_workstation_command_names_the_extra_it_needs(onboard, command):
+    result = subprocess.run([str(onboard / "hrlsac"), *command], capture_output=True, text=True, timeout=300,
+                            cwd=onboard)
+    assert result.returncode == 2
+    assert result.stderr.strip().endswith("which an on-board install leaves out: pip install 'hrlsac[train]'")
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_onboard_install_flies_a_mission_against_the_simulated_vehicle(onboard, tmp_path):
+    """``hrlsac mission run`` of the on-board install against ``hrlsac sitl`` of this checkout, over real UDP."""
+    _, _, report = fly_against_sitl_process(SimpleNamespace(path=PRETRAINED), tmp_path,
+                                            runner=[str(onboard / "hrlsac")])
+    assert [t["to"] for t in report["transitions"]] == ALL_STATES
+    assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20
