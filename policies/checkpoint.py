@@ -42,6 +42,11 @@ class _EnvironmentUnpickler(pickle.Unpickler):
         return super().find_class(MOVED_MODULES.get(module, module), name)
 
 
+def dump_environment(core) -> bytes:
+    """The environments' state as a checkpoint holds it (``"env"``)."""
+    return pickle.dumps(core)
+
+
 def load_environment(pickled: bytes):
     """The environments' state pickled in a checkpoint (``"env"``), whichever module layout wrote it."""
     return _EnvironmentUnpickler(io.BytesIO(pickled)).load()

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from autonomy.mission_cli import mission_parser, prepare_mission
+
 # mission_replay at the top, though only the workers use it: on an on-board install (no OpenCV for the replay's
 # pictures) the command then says at once which extra it needs, before it reads any file.
 from simulation import mission_replay  # noqa: F401
@@ -34,7 +35,7 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
     if isinstance(prepared, int):
         return prepared
     mission, policy, out = prepared
-    return _replay(mission, policy, args, out)
+    return _replay(mission, policy, args, out, prog)
 
 
 def _check_replay_arguments(args: argparse.Namespace) -> None:
@@ -51,7 +52,7 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
         raise ValueError(str(exc)) from None
 
 
-def _replay(mission, policy, args, out: Path) -> int:
+def _replay(mission, policy, args, out: Path, prog: str) -> int:
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
     options = dict(signing_key=args.key, link_faults=args.faults)
     episodes = [ReplayEpisode(mission, args.policy, args.seed + episode,
@@ -72,7 +73,7 @@ def _replay(mission, policy, args, out: Path) -> int:
     try:
         reports = replay_episodes(episodes, args.pool, show_progress)
     except WorkerPoolError as exc:
-        print(f"hrlsac mission replay: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     if args.episodes > 1 and not args.quiet:
         print(file=sys.stderr)

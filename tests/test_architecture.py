@@ -66,7 +66,7 @@ def test_the_table_names_every_unit_there_is():
 def test_imports_follow_the_allowed_table(module):
     table = allowed_imports()
     unit = unit_of(module)
-    allowed = table.get(unit, {"policies.env"} if unit == "policies" else set()) | {unit}
+    allowed = table.get(unit, set()) | {unit}
     wrong = sorted(name for name in GRAPH[module] if unit_of(name) not in allowed)
     assert not wrong, f"{module} ({MODULES[module].relative_to(ROOT)}) imports {wrong}, outside {sorted(allowed)}"
 

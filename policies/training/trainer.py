@@ -30,7 +30,6 @@ import csv
 import json
 import math
 import os
-import pickle
 import sys
 import time
 from collections import deque
@@ -47,7 +46,14 @@ from policies.agents.n_step import NStepReturns
 from policies.agents.normalizer import RunningMeanStd
 from policies.agents.prioritized_replay import PrioritizedReplayBuffer, linear_beta
 from policies.agents.sac import SAC
-from policies.checkpoint import CHECKPOINT, CheckpointPolicy, atomic_torch_save, load_checkpoint_state, load_environment
+from policies.checkpoint import (
+    CHECKPOINT,
+    CheckpointPolicy,
+    atomic_torch_save,
+    dump_environment,
+    load_checkpoint_state,
+    load_environment,
+)
 from policies.config import TrainConfig
 from policies.env.ambiguous import REWARD_RETURNED
 from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
@@ -354,7 +360,7 @@ class Trainer:
             "low": self.low.state_dict(), "low_buffer": self.low_buffer.state_dict(),
             "meta": self.meta.state_dict() if self.meta else None,
             "meta_buffer": self.meta_buffer.state_dict() if self.meta_buffer else None,
-            "normalizer": self.normalizer.state_dict(), "env": pickle.dumps(self.env.core),
+            "normalizer": self.normalizer.state_dict(), "env": dump_environment(self.env.core),
             "obs": self.obs.copy(), "needs_goal": self.needs_goal.copy(),
             "segment": [self.segment_obs.copy(), self.segment_goal.copy(), self.segment_return.copy(),
                         self.segment_steps.copy(), self.segment_reached.copy()],
