@@ -29,6 +29,7 @@ from autonomy.artifact_seal import SealError, ends_with_zip_end, is_sealed, unse
 from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
+from missions.goals import goal_due
 
 ZIP_MAGIC = b"PK\x03\x04"
 # Names of the two programs in a torch-export artifact (a PT2 archive). "model" is the name plain
@@ -65,7 +66,7 @@ class Policy:
 
     def goal_due(self, step: int) -> bool:
         """Whether the meta-controller decides at this step of the mission (steps 0, K, 2K, ...)."""
-        return self.hierarchical and step % self.manifest.subgoal_interval == 0
+        return self.hierarchical and bool(goal_due(step, self.manifest.subgoal_interval))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         """(N, 284) or (284,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""

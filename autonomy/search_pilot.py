@@ -29,7 +29,7 @@ import numpy as np
 from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
 from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, target_frame_to_north_east
-from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
+from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE, goal_due
 from missions.mission import Mission
 from missions.search import ScenarioBatch
 from missions.shield import shield_velocity
@@ -106,7 +106,7 @@ class SearchPilot:
             self._segment_reached |= bool(out.goal_reached[0])
             end = self._end_reason(out)
         new_goal = False
-        if end is None and self.policy.hierarchical and self.step % self.subgoal_interval == 0:
+        if end is None and self.policy.hierarchical and goal_due(self.step, self.subgoal_interval):
             self._close_segment()
             goal = int(self.policy.select_goal(observe_search(state, True)[0, :LAYOUT_V4.meta_dim]))
             state.set_goals(np.array([goal]))

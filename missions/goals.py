@@ -34,6 +34,15 @@ GOAL_NAMES: tuple[str, ...] = ("ExploreArea", "SearchSpecificLocation", "TrackOb
 NO_GOAL = -1
 """Goal index of a search without a meta-controller goal (flat SAC, or before the first decision)."""
 EXPLORE, SEARCH_LOCATION, TRACK_OBJECT, RETURN_TO_BASE = range(4)
+
+
+def goal_due(steps, subgoal_interval: int):
+    """Whether the meta-controller chooses a goal at a search's step count ``steps`` (an int or an array): at the
+    episode's first step and every K = ``subgoal_interval`` steps after (0, K, 2K, ...). The one statement of
+    the cadence: training, evaluation, the export's parity check and the flight pilot all ask it."""
+    return steps % subgoal_interval == 0
+
+
 BLOCKS = 8  # ExploreArea works on an 8 x 8 grid of blocks
 DISTANCE_WEIGHT = 0.5
 TRAVEL_SCALE_M = 200.0

@@ -20,7 +20,7 @@ from policies.cli import compare as compare_cli
 from policies.config import TrainConfig
 from policies.evaluation.episodes import summarise
 from policies.reports.compare import compare, t_interval, t_quantile_975
-from policies.training.trainer import LOG_FIELDS
+from policies.training.progress_log import LOG_FIELDS
 
 EPISODES = 10
 MAX_STEPS = 500  # every fake run (and so the baselines) flies with this step limit, not the preset's 1000

@@ -105,7 +105,7 @@ def test_running_dry_costs_50_and_coming_home_with_reserve_pays_20():
         assert bool(np.asarray(info["returned_with_reserve"])) == (paid > 0.0)
         # TrainConfig.meta_returned_reward replaces the +20 in what the meta-controller learns from, nothing else
         from policies.config import TrainConfig
-        from policies.training.trainer import meta_learning_reward
+        from policies.env.shaping import meta_learning_reward
 
         learned = meta_learning_reward(TrainConfig(meta_returned_reward=-5.0), np.array([reward]),
                                        {k: np.atleast_1d(v) for k, v in info.items()})

@@ -18,9 +18,9 @@ from missions.mission import FlightSettings
 from missions.search import footprint_half_width_m
 from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
-from policies.evaluation.parallel import evaluate_checkpoint
-from policies.evaluation.parallel import quick_success_rate
-from policies.training.trainer import Trainer, cross_track_m
+from policies.env.shaping import cross_track_m
+from policies.evaluation.parallel import evaluate_checkpoint, quick_success_rate
+from policies.training.trainer import Trainer
 
 SMALL = NetworkConfig(hidden=(32, 32))
 

@@ -72,5 +72,6 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
                 "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
                 "belief_removed": out.belief_removed, "identify_chance": out.identify_chance,
                 "energy_left": self.energy_left,
-                "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
+                "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps,
+                **self.step_start_info()}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info

@@ -228,10 +228,11 @@ class FlownSearch:
         a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.n, 4), ACTION_LOW, ACTION_HIGH)
         self.last_action[:] = a
         previous = self.position.copy()
+        target = self.target_position(self.config.goal_conditioned)
+        self._step_start = (previous, target.copy(), np.array(self.searched_cells, dtype=np.float64))
         movement = a[:, 0:2]
         if self.config.action_frame == "target":  # SarSearch-v1's option: movement towards / right of the target
-            movement = target_frame_to_north_east(movement, self.position,
-                                                  self.target_position(self.config.goal_conditioned))
+            movement = target_frame_to_north_east(movement, self.position, target)
         velocity = movement * flight.max_speed_mps
         if self.shielded:  # SarSearch-v1: the safety filter the flight pilot applies too
             velocity = shield_velocity(self.position, velocity, self.scen.obstacles, self.scen.obstacle_valid,
@@ -241,6 +242,16 @@ class FlownSearch:
         position = np.stack([v.north_m, v.east_m], axis=1)
         self.path_length_m += np.hypot(position[:, 0] - previous[:, 0], position[:, 1] - previous[:, 1])
         return a, position
+
+    def step_start_info(self) -> dict[str, np.ndarray]:
+        """The info entries that describe the step from where it started (the learning reward's inputs,
+        ``policies.env.shaping``): the position, the target the observation pointed at (the goal's point, or
+        flat SAC's target), the coverage the step added and the area of one coverage cell."""
+        start_position, target, searched_before = self._step_start
+        area = self.scen.area
+        return {"start_position": start_position, "step_target": target,
+                "newly_searched_cells": self.searched_cells - searched_before,
+                "cell_area_m2": (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / self.coverage[0].size}
 
     @property
     def meta_observation(self) -> np.ndarray:
@@ -284,5 +295,6 @@ class SarSearchBatch(FlownSearch, SearchState):
                 # A sub-goal is completed when reaching it moves the search on, or on the episode's last step.
                 "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
                 "first_detection_chance": out.first_detection_chance,
-                "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps}
+                "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps,
+                **self.step_start_info()}
         return self.observe(), reward.astype(np.float32), terminated, truncated, info

@@ -1,24 +1,27 @@
-"""The learning reward of the continuous SAC: HRL-SAC's low-level shaping towards its goal point, which flat SAC
-gets too with ``TrainConfig.flat_shaping`` (towards its own target, the observation's ``target_offset`` point).
+"""The learning rewards: what the agents learn from, as opposed to the environment reward they are judged by.
+
+``shaped_reward`` is the continuous SAC's: HRL-SAC's low-level shaping towards its goal point, which flat SAC gets
+too with ``TrainConfig.flat_shaping`` (towards its own target, the observation's ``target_offset`` point).
+``meta_learning_reward`` is the meta-controller's. Both read only what a step returns (reward and info).
 
 Per step, with g the point the step flew towards (the goal's point; flat SAC: TrackObject's point):
 ``(||s - g|| - ||s' - g||) / intrinsic_scale_m`` (or the paper's ``-||s' - g|| / intrinsic_scale_m``) minus
-``cross_track_penalty`` x the metres flown sideways to the line to g, + ``coverage_bonus`` per newly covered cell (or
-per cell of ground swept, ``coverage_swept``; SarSearch-v1: per cell of cumulative probability of detection; times the intensity with ``coverage_by_intensity``),
-+ ``belief_bonus`` x the belief the look removed and ``identify_bonus`` x the chance that a close look identified a
-candidate (both SarSearch-v1, both under the crew's model), + ``detection_bonus`` x the first-detection
-chance (SarSearch-v0); HRL-SAC adds ``intrinsic_goal_bonus`` on completing g and ``extrinsic_weight`` x the
-environment reward without its per-step cost; flat SAC adds that environment reward whole (still without the
-per-step cost: with it, leaving the area at once, -10, is worth about as much as a long search).
+``cross_track_penalty`` x the metres flown sideways to the line to g, + ``coverage_bonus`` per newly covered cell
+(or per cell of ground swept, ``coverage_swept``; SarSearch-v1: per cell of cumulative probability of detection;
+times the intensity with ``coverage_by_intensity``), + ``belief_bonus`` x the belief the look removed and
+``identify_bonus`` x the chance that a close look identified a candidate (both SarSearch-v1, both under the crew's
+model), + ``detection_bonus`` x the first-detection chance (SarSearch-v0); HRL-SAC adds ``intrinsic_goal_bonus``
+on completing g and ``extrinsic_weight`` x the environment reward without its per-step cost; flat SAC adds that
+environment reward whole (still without the per-step cost: with it, leaving the area at once, -10, is worth about
+as much as a long search).
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from missions import search
 from policies.config import TrainConfig
+from policies.env.ambiguous import REWARD_RETURNED
 from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
 
 
@@ -31,36 +34,18 @@ def cross_track_m(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> np.nd
     return np.divide(cross, length, out=np.zeros_like(length), where=length > 1e-6)
 
 
-@dataclass
-class StepStart:
-    """What the shaping needs from before a step (an auto-reset may load another scenario into a slot)."""
-
-    position: np.ndarray
-    target: np.ndarray
-    searched_cells: np.ndarray
-    cell_area_m2: np.ndarray
-    step_reward: float
-    """The environment reward's constant per-step part, left out of the learning reward."""
-
-
-def before_step(core, hrl: bool) -> StepStart:
-    """The positions, targets, covered cells and grid-cell areas of ``core``'s searches before a step."""
-    area = core.scen.area
-    target = core.goal_point if hrl else core.target_position(False)
-    return StepStart(core.position.copy(), target.copy(), np.array(core.searched_cells, dtype=np.float64),
-                     (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / core.coverage[0].size, core.step_reward)
-
-
-def shaped_reward(config: TrainConfig, hrl: bool, start: StepStart, actions: np.ndarray, info: dict,
-                  reward: np.ndarray) -> np.ndarray:
-    """(N,) the learning reward of a step (module docstring) from the step's ``info`` and environment ``reward``."""
+def shaped_reward(config: TrainConfig, hrl: bool, actions: np.ndarray, info: dict, reward: np.ndarray,
+                  step_reward: float) -> np.ndarray:
+    """(N,) the learning reward of a step (module docstring) from the step's ``info`` (its ``step_start_info``
+    entries say where the step started), its environment ``reward`` and the environment's constant per-step part
+    of that reward, ``step_reward``, which the learning reward leaves out."""
     cfg, position = config, info["position"]
-    distance = np.hypot(*(position - start.target).T)
-    toward = np.hypot(*(start.position - start.target).T) - distance if cfg.intrinsic_reward == "progress" \
-        else -distance
-    sideways = cross_track_m(start.position, position, start.target) if cfg.cross_track_penalty else 0.0
+    start, target = info["start_position"], info["step_target"]
+    distance = np.hypot(*(position - target).T)
+    toward = np.hypot(*(start - target).T) - distance if cfg.intrinsic_reward == "progress" else -distance
+    sideways = cross_track_m(start, position, target) if cfg.cross_track_penalty else 0.0
     out = ((toward - cfg.cross_track_penalty * sideways) / cfg.intrinsic_scale_m
-           + cfg.coverage_bonus * searched_cells(cfg, start, actions, info)
+           + cfg.coverage_bonus * searched_cells(cfg, actions, info)
            + cfg.belief_bonus * info.get("belief_removed", 0.0)
            + cfg.identify_bonus * info.get("identify_chance", 0.0)
            + cfg.detection_bonus * info.get("first_detection_chance", 0.0))
@@ -69,20 +54,28 @@ def shaped_reward(config: TrainConfig, hrl: bool, start: StepStart, actions: np.
         # unsearched cell with the sensor off the goal stays put, and a bonus for arriving paid every step of
         # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
         return (out + cfg.intrinsic_goal_bonus * info["goal_completed"]
-                + cfg.extrinsic_weight * (reward - start.step_reward))
-    return out + (reward - start.step_reward)
+                + cfg.extrinsic_weight * (reward - step_reward))
+    return out + (reward - step_reward)
 
 
-def searched_cells(config: TrainConfig, start: StepStart, actions: np.ndarray, info: dict) -> np.ndarray:
+def searched_cells(config: TrainConfig, actions: np.ndarray, info: dict) -> np.ndarray:
     """What the coverage bonus counts this step, in grid cells: the newly covered cells (SarSearch-v1: the cells'
     gain in cumulative probability of detection), or with ``coverage_swept``
     the ground the camera footprint swept (sensor on), either times the search intensity with
     ``coverage_by_intensity``."""
     cfg, intensity = config, actions[:, SEARCH_INTENSITY].clip(0.0, 1.0)
     if cfg.coverage_swept:
-        step_m = np.hypot(*(info["position"] - start.position).T)
+        step_m = np.hypot(*(info["position"] - info["start_position"]).T)
         half_width = search.footprint_half_width_m(cfg.flight.altitude_m, actions[:, CAMERA_ZOOM].clip(0.0, 1.0))
-        searched = step_m * 2.0 * half_width / start.cell_area_m2 * (intensity >= search.SENSOR_ON_INTENSITY)
+        searched = step_m * 2.0 * half_width / info["cell_area_m2"] * (intensity >= search.SENSOR_ON_INTENSITY)
     else:
-        searched = info["searched_cells"] - start.searched_cells
+        searched = info["newly_searched_cells"]
     return searched * intensity if cfg.coverage_by_intensity else searched
+
+
+def meta_learning_reward(config: TrainConfig, reward: np.ndarray, info: dict) -> np.ndarray:
+    """(N,) the environment reward the meta-controller learns from: with ``meta_returned_reward`` set, a return home
+    with reserve pays that instead of the environment's ``REWARD_RETURNED`` (SarSearch-v1)."""
+    if config.meta_returned_reward is None or "returned_with_reserve" not in info:
+        return reward
+    return reward + (config.meta_returned_reward - REWARD_RETURNED) * info["returned_with_reserve"]

@@ -68,5 +68,11 @@ class SarSearchVectorEnv(VectorEnv):
         return self.core.obs.copy()
 
     @property
+    def step_reward(self) -> float:
+        """The environment reward's constant per-step part (SarSearch-v0's -0.1, v1's 0): the learning rewards
+        (``policies.env.shaping``) leave it out."""
+        return self.core.step_reward
+
+    @property
     def meta_observation(self) -> np.ndarray:
         return self.core.meta_observation.copy()

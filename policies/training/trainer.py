@@ -26,10 +26,8 @@ uninterrupted one.
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
-import os
 import sys
 import time
 from collections import deque
@@ -39,7 +37,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from missions.goals import GOAL_NAMES
+from missions.goals import GOAL_NAMES, goal_due
 from missions.mission_file import load_mission
 from policies.agents.discrete_sac import DiscreteSAC
 from policies.agents.n_step import NStepReturns
@@ -55,15 +53,10 @@ from policies.checkpoint import (
     load_environment,
 )
 from policies.config import TrainConfig
-from policies.env.ambiguous import REWARD_RETURNED
 from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
-from policies.env.shaping import before_step, cross_track_m, shaped_reward  # noqa: F401  (cross_track_m: re-exported)
+from policies.env.shaping import meta_learning_reward, shaped_reward
 from policies.env.vector import SarSearchVectorEnv
-
-LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
-              "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
-              "meta_entropy", "eval_success_rate", "steps_per_s")
-WINDOW = 100  # episodes in the rolling statistics
+from policies.training.progress_log import WINDOW, ProgressLog, progress_row, truncate_after
 
 
 class Trainer:
@@ -125,7 +118,6 @@ class Trainer:
             seeds = self.rng.integers(0, 2**62, size=n)
             self.obs, _ = self.env.reset(seed=[int(s) for s in seeds])
             (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
-        self._writer = None
 
     def _new_meta_buffer(self) -> PrioritizedReplayBuffer:
         cfg = self.config
@@ -185,14 +177,13 @@ class Trainer:
             actions = self.rng.uniform(ACTION_LOW, ACTION_HIGH, size=(cfg.num_envs, 4)).astype(np.float32)
         else:
             actions = self.low.act(self._norm(self.obs), deterministic=frozen).astype(np.float32)
-        start = before_step(self.env.core, self.hrl)
         next_obs, reward, terminated, truncated, info = self.env.step(actions)
         done = terminated | truncated
         real_next = next_obs.copy()  # the observation the transition really ended in (not the reset one)
         for i in np.flatnonzero(done):
             real_next[i] = info["final_obs"][i]
         if self.hrl or cfg.flat_shaping:
-            low_reward = shaped_reward(cfg, self.hrl, start, actions, info, reward)
+            low_reward = shaped_reward(cfg, self.hrl, actions, info, reward, self.env.step_reward)
         else:
             low_reward = reward
         if self.hrl:
@@ -204,7 +195,7 @@ class Trainer:
         if self.hrl:
             self.segment_return += cfg.meta_gamma ** self.segment_steps * meta_learning_reward(cfg, reward, info)
             self.segment_steps += 1
-            finish = (self.segment_steps >= cfg.flight.subgoal_interval) | done
+            finish = goal_due(info["steps"], cfg.flight.subgoal_interval) | done  # done: steps restart at 0
             if finish.any() and self.meta_learns:
                 self.meta_buffer.add(obs=self.segment_obs[finish], action=self.segment_goal[finish],
                                      reward=self.segment_return[finish].astype(np.float32),
@@ -263,16 +254,11 @@ class Trainer:
         """Train to ``total_steps`` (or stop early at ``stop_at`` steps, for tests); returns the checkpoint path."""
         cfg = self.config
         end = min(cfg.total_steps, stop_at) if stop_at is not None else cfg.total_steps
-        csv_path = self.run_dir / "progress.csv"
-        new_csv = not csv_path.exists()
         started, started_step = time.perf_counter(), self.step
         last_log = self.step // cfg.log_every
         last_checkpoint = self.step // cfg.checkpoint_every
         last_eval = self.step // cfg.eval_every if cfg.eval_every else 0
-        with open(csv_path, "a", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
-            if new_csv:
-                writer.writeheader()
+        with ProgressLog(self.run_dir, self.step, progress) as log:
             while self.step < end:
                 self.learn(self.collect())
                 if cfg.eval_every and self.evaluate and self.step // cfg.eval_every > last_eval:
@@ -280,12 +266,9 @@ class Trainer:
                     self.quick_evaluation()
                 if self.step // cfg.log_every > last_log:
                     last_log = self.step // cfg.log_every
-                    row = self._log_row(started, started_step)
-                    writer.writerow(row)
-                    handle.flush()
-                    self._tensorboard(row)
-                    if progress:
-                        self._print_progress(row, end)
+                    steps_per_s = (self.step - started_step) / max(time.perf_counter() - started, 1e-9)
+                    log.write(progress_row(self.step, self.episodes, self.recent, self.recent_subgoals,
+                                           self.metrics, steps_per_s), end)
                 if self.step // cfg.checkpoint_every > last_checkpoint:
                     last_checkpoint = self.step // cfg.checkpoint_every
                     self.save()
@@ -297,8 +280,7 @@ class Trainer:
             if self.best_meta is not None and self.step >= cfg.total_steps:
                 print(f"kept the meta-controller of step {self.best_meta['step']:,} (val success "
                       f"{self.best_meta['success']:.1%} on {cfg.eval_episodes} episodes)", file=sys.stderr)
-        if self._writer is not None:
-            self._writer.close()
+        log.close()
         return path
 
     def quick_evaluation(self) -> float:
@@ -316,42 +298,6 @@ class Trainer:
             actor = {key: value.clone() for key, value in self.meta.actor.state_dict().items()}
             self.best_meta = {"success": success, "step": self.step, "actor": actor}
         return success
-
-    def _log_row(self, started: float, started_step: int) -> dict:
-        recent = np.array(self.recent) if self.recent else np.zeros((0, 4))
-        mean = (lambda column: float(recent[:, column].mean()) if len(recent) else math.nan)
-        m = self.metrics
-        elapsed = max(time.perf_counter() - started, 1e-9)
-        return {"step": self.step, "episodes": self.episodes, "success_rate": mean(0), "mean_return": mean(1),
-                "mean_length": mean(2), "mean_coverage": mean(3),
-                "subgoal_reachability": float(np.mean(self.recent_subgoals)) if self.recent_subgoals else math.nan,
-                "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
-                "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
-                "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
-                "eval_success_rate": m.get("eval_success_rate", math.nan),
-                "steps_per_s": (self.step - started_step) / elapsed}
-
-    def _tensorboard(self, row: dict) -> None:
-        try:
-            if self._writer is None:
-                from torch.utils.tensorboard import SummaryWriter
-
-                self._writer = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=self.step)
-        except ImportError:  # tensorboard is a dependency, but training must not die for the lack of a log
-            self._writer = False
-        if self._writer:
-            for key, value in row.items():
-                if key != "step" and not math.isnan(value):
-                    self._writer.add_scalar(key, value, row["step"])
-
-    def _print_progress(self, row: dict, end: int) -> None:
-        done = self.step / end
-        bar = "#" * int(30 * done) + "." * (30 - int(30 * done))
-        line = (f"[{bar}] {self.step:,}/{end:,} steps  {row['steps_per_s']:,.0f}/s  episodes {row['episodes']}  "
-                f"success {row['success_rate']:.0%}  return {row['mean_return']:.1f}"
-                + ("" if math.isnan(row["eval_success_rate"]) else f"  val success {row['eval_success_rate']:.0%}"))
-        print(("\r" + line) if sys.stderr.isatty() else line, end="" if sys.stderr.isatty() else "\n",
-              file=sys.stderr, flush=True)
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
@@ -398,26 +344,4 @@ class Trainer:
         self.best_meta = state.get("best_meta")  # checkpoints from before meta_keep_best have none
         if self.n_step is not None:
             self.n_step.pending = state["n_step"]
-        self._truncate_csv(self.step)
-
-    def _truncate_csv(self, step: int) -> None:
-        """Drop log rows written after the checkpoint a resumed run continues from (they will be rewritten)."""
-        path = self.run_dir / "progress.csv"
-        if not path.exists():
-            return
-        with open(path, newline="") as handle:
-            rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= step]
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
-            writer.writeheader()
-            writer.writerows(rows)
-        os.replace(tmp, path)
-
-
-def meta_learning_reward(cfg: TrainConfig, reward: np.ndarray, info: dict) -> np.ndarray:
-    """The environment reward the meta-controller learns from: with ``meta_returned_reward`` set, a return home
-    with reserve pays that instead of the environment's REWARD_RETURNED (SarSearch-v1)."""
-    if cfg.meta_returned_reward is None or "returned_with_reserve" not in info:
-        return reward
-    return reward + (cfg.meta_returned_reward - REWARD_RETURNED) * info["returned_with_reserve"]
+        truncate_after(self.run_dir, self.step)

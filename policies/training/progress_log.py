@@ -1,0 +1,111 @@
+"""What a training run tells as it goes: one row of ``progress.csv`` every ``log_every`` steps, the same figures
+as tensorboard scalars (``<run>/tensorboard``) and a progress line on stderr.
+
+The columns are ``LOG_FIELDS``; rolling figures are over the last ``WINDOW`` finished episodes. A resumed run
+first drops the rows written after its checkpoint (``truncate_after``): they are written again as it continues.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
+              "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
+              "meta_entropy", "eval_success_rate", "steps_per_s")
+WINDOW = 100
+"""Finished episodes in the rolling statistics."""
+
+
+def progress_row(step: int, episodes: int, recent: Sequence[tuple], recent_subgoals: Sequence[float],
+                 metrics: dict[str, float], steps_per_s: float) -> dict:
+    """One log row: ``recent`` holds (success, return, length, coverage) of the last finished episodes,
+    ``recent_subgoals`` 1 or 0 per finished goal segment (its point reached in time), ``metrics`` the latest
+    losses and temperatures."""
+    recent = np.array(recent) if len(recent) else np.zeros((0, 4))
+    mean = (lambda column: float(recent[:, column].mean()) if len(recent) else math.nan)
+    m = metrics
+    return {"step": step, "episodes": episodes, "success_rate": mean(0), "mean_return": mean(1),
+            "mean_length": mean(2), "mean_coverage": mean(3),
+            "subgoal_reachability": float(np.mean(recent_subgoals)) if len(recent_subgoals) else math.nan,
+            "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
+            "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
+            "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
+            "eval_success_rate": m.get("eval_success_rate", math.nan), "steps_per_s": steps_per_s}
+
+
+class ProgressLog:
+    """``progress.csv`` (appended to), tensorboard and the stderr line of the run in ``run_dir``; use as a
+    context manager around the training loop."""
+
+    def __init__(self, run_dir: Path, first_step: int, show_progress: bool = True):
+        self.run_dir, self.first_step, self.show_progress = Path(run_dir), first_step, show_progress
+        self._handle = self._writer = None
+        self._tensorboard = None
+
+    def __enter__(self) -> ProgressLog:
+        path = self.run_dir / "progress.csv"
+        new_file = not path.exists()
+        self._handle = open(path, "a", newline="")
+        self._writer = csv.DictWriter(self._handle, fieldnames=LOG_FIELDS)
+        if new_file:
+            self._writer.writeheader()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._handle.close()
+
+    def write(self, row: dict, end_step: int) -> None:
+        """Log ``row`` (``progress_row``) everywhere; ``end_step`` is where the progress bar ends."""
+        self._writer.writerow(row)
+        self._handle.flush()
+        self._add_scalars(row)
+        if self.show_progress:
+            self._print(row, end_step)
+
+    def close(self) -> None:
+        """Close tensorboard's writer (the csv file closes with the context)."""
+        if self._tensorboard:
+            self._tensorboard.close()
+
+    def _add_scalars(self, row: dict) -> None:
+        try:
+            if self._tensorboard is None:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self._tensorboard = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=self.first_step)
+        except ImportError:  # tensorboard comes with the train extra, but training must not die for a log
+            self._tensorboard = False
+        if self._tensorboard:
+            for key, value in row.items():
+                if key != "step" and not math.isnan(value):
+                    self._tensorboard.add_scalar(key, value, row["step"])
+
+    def _print(self, row: dict, end_step: int) -> None:
+        done = row["step"] / end_step
+        bar = "#" * int(30 * done) + "." * (30 - int(30 * done))
+        line = (f"[{bar}] {row['step']:,}/{end_step:,} steps  {row['steps_per_s']:,.0f}/s  episodes "
+                f"{row['episodes']}  success {row['success_rate']:.0%}  return {row['mean_return']:.1f}"
+                + ("" if math.isnan(row["eval_success_rate"]) else f"  val success {row['eval_success_rate']:.0%}"))
+        print(("\r" + line) if sys.stderr.isatty() else line, end="" if sys.stderr.isatty() else "\n",
+              file=sys.stderr, flush=True)
+
+
+def truncate_after(run_dir: Path, step: int) -> None:
+    """Drop the rows of ``run_dir``'s progress.csv written after ``step`` (atomically: a crash keeps the old file)."""
+    path = Path(run_dir) / "progress.csv"
+    if not path.exists():
+        return
+    with open(path, newline="") as handle:
+        rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= step]
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, path)
