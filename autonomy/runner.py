@@ -18,7 +18,7 @@ stream send when due and checks the failsafes; the states' waits are loops of ti
 
 In SEARCH a decision is due every ``step_period_s``: the :class:`autonomy.search_pilot.SearchPilot` turns the
 filtered pose into the policy's action, the geofence guard may replace it, and the stream flies it. The policy
-runs in a :class:`autonomy.decision_worker.DecisionWorker` (a thread in real time, a simulated latency in lockstep).
+runs in a :class:`autonomy.search_pilot.DecisionWorker` (a thread in real time, a simulated latency in lockstep).
 Every transition and failsafe is recorded with its reason.
 """
 from __future__ import annotations
@@ -26,24 +26,23 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.autopilots import PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
-from autonomy.decision_worker import DecisionWorker
 from autonomy.estimator import PoseEstimator
 from autonomy.geofence import guard_velocity
 from autonomy.link_loss import LinkLossMonitor
+from autonomy.mission_report import mission_report
 from autonomy.preflight import describe_point, home_disagreement
 from autonomy.runner_config import RunnerConfig
-from autonomy.search_pilot import Decision, SearchPilot
+from autonomy.search_pilot import Decision, DecisionWorker, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
 from autonomy.vehicle_link import VehicleLink, enum_name
-from autonomy.vehicle_time import BootTimeMap
+from autonomy.vehicle_time import BootTimeMap, receive_telemetry
 from missions.mission import Mission
 
-__all__ = ["Clock", "MissionAborted", "MissionRunner", "RunnerConfig", "WallClock", "receive_telemetry"]
+__all__ = ["Clock", "MissionAborted", "MissionRunner", "RunnerConfig", "WallClock"]
 
 POSITION_RATE_HZ = 10.0
 STREAM_REQUEST_PERIOD_S = 2.0  # before arming, missing streams and HOME_POSITION are asked for again this often
@@ -425,42 +424,5 @@ class MissionRunner:
 
     # ------------------------------------------------------------------ the report
     def report(self) -> dict:
-        search = self.pilot.summary()
-        path = np.array([(n, e) for _, n, e in self.trajectory]) if self.trajectory else np.zeros((0, 2))
-        return {
-            "mission": self.mission.name,
-            "success": self.search_end == "victim reached",
-            "search_end": self.search_end,
-            **search,
-            "path_length_m": float(np.hypot(*np.diff(path, axis=0).T).sum()) if len(path) > 1 else 0.0,
-            "trajectory": [[t, round(n, 2), round(e, 2)] for t, n, e in self.trajectory],
-            "flight_time_s": round(self.clock.now(), 3),
-            "setpoints_sent": self.streamer.sent,
-            "companion_heartbeats": self.link.sent_heartbeats,
-            "transitions": self.transitions,
-            "failsafes": [e for e in self.events if e["event"] == "failsafe"],
-            "events": self.events,
-            "autopilot": self.flavour.name,
-            "resumptions": self.link_loss.resumptions,
-            "estimator": self.estimator.counters(),
-            "vehicle_time": {"offset_s": self.boot_time.offset_s, "timeline_changes": self.boot_time.timeline_changes,
-                             "last_change": self.boot_time.last_change, "ignored": self.boot_time.ignored},
-        }
-
-
-def receive_telemetry(link: VehicleLink, estimator: PoseEstimator, boot_time: BootTimeMap) -> list:
-    """Everything the vehicle sent since the last call, its positions fused into the estimator on the runner's clock
-    (``boot_time`` maps their time_boot_ms; a new vehicle timeline restarts the filter). The runner's whole receive
-    path: :mod:`tests.test_fuzz_mavlink` feeds it garbage."""
-    messages = link.tick()
-    now = link.clock()
-    for msg in messages:
-        if msg.get_type() == "GLOBAL_POSITION_INT":
-            time_s = boot_time.to_runner_time(msg.time_boot_ms, now)
-            if time_s is None:
-                continue
-            if boot_time.timeline_changed:
-                boot_time.timeline_changed = False
-                estimator.restart(boot_time.last_change)
-            estimator.update_global_position_int(msg, time_s)
-    return messages
+        """The mission report (``autonomy.mission_report``): also what a killed run leaves behind."""
+        return mission_report(self)

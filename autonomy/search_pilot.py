@@ -19,9 +19,15 @@ The camera is simulated in every mode, also against a real autopilot: a real pay
 detections here instead (not built; see docs/runner.md). The search state models the camera's altitude itself
 (descent and climb at the rates of ``missions.belief_search``), so the runner's altitude controller need not match
 it to the metre.
+
+:class:`DecisionWorker` runs ``decide`` off the runner's control loop, which must keep streaming setpoints whatever
+the policy does: in real time in a thread (a slow policy delays decisions, never setpoints), in lockstep
+synchronously with its answer released after ``compute_time_s`` of simulated time (0 unless a test makes a policy
+slow), so that replays stay deterministic.
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,3 +175,39 @@ class SearchPilot:
             "subgoal_reachability": (self.goals_reached / self.goal_segments) if self.goal_segments else None,
             "goal_names": list(GOAL_NAMES),
         }
+
+
+class DecisionWorker:
+    """Runs ``pilot.decide`` off the control loop; ``threaded`` in real time, simulated latency in lockstep."""
+
+    def __init__(self, pilot: SearchPilot, threaded: bool, simulated_compute_s: float = 0.0):
+        self.pilot, self.threaded = pilot, threaded
+        self.compute_time_s = simulated_compute_s
+        self._pending: tuple[float, Decision] | None = None
+        self._thread: threading.Thread | None = None
+        self._result: Decision | None = None
+
+    @property
+    def busy(self) -> bool:
+        return self._pending is not None or (self._thread is not None and self._thread.is_alive())
+
+    def submit(self, position_ne: np.ndarray, now_s: float) -> None:
+        if self.threaded:
+            def work() -> None:
+                self._result = self.pilot.decide(position_ne)
+            self._thread = threading.Thread(target=work, name="policy", daemon=True)
+            self._thread.start()
+        else:
+            self._pending = (now_s + self.compute_time_s, self.pilot.decide(position_ne))
+
+    def poll(self, now_s: float) -> Decision | None:
+        """The finished decision, once (None while computing or idle)."""
+        if self.threaded:
+            if self._thread is not None and not self._thread.is_alive():
+                self._thread, result, self._result = None, self._result, None
+                return result
+            return None
+        if self._pending is not None and now_s + 1e-9 >= self._pending[0]:
+            decision, self._pending = self._pending[1], None
+            return decision
+        return None

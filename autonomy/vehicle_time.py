@@ -21,12 +21,18 @@ request do (MAVLink's TIMESYNC exchange would give the same estimate with one mo
   runner can restart its estimator from the next message instead of connecting two unrelated timelines.
 
 Lockstep replays run the same code: there the arrival time is the simulated clock, so the map is exact.
+:func:`receive_telemetry` is the runner's whole receive path: messages in, positions fused on the runner's clock.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from missions.validation import check_fields
+
+if TYPE_CHECKING:  # types only: the link and the estimator do not need this module
+    from autonomy.estimator import PoseEstimator
+    from autonomy.vehicle_link import VehicleLink
 
 
 @dataclass(frozen=True)
@@ -105,3 +111,21 @@ class BootTimeMap:
             self.timeline_changed = True
             self.timeline_changes += 1
             self.last_change = reason
+
+
+def receive_telemetry(link: VehicleLink, estimator: PoseEstimator, boot_time: BootTimeMap) -> list:
+    """Everything the vehicle sent since the last call, its positions fused into the estimator on the runner's clock
+    (``boot_time`` maps their time_boot_ms; a new vehicle timeline restarts the filter). The runner's whole receive
+    path: :mod:`tests.test_fuzz_mavlink` feeds it garbage."""
+    messages = link.tick()
+    now = link.clock()
+    for msg in messages:
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            time_s = boot_time.to_runner_time(msg.time_boot_ms, now)
+            if time_s is None:
+                continue
+            if boot_time.timeline_changed:
+                boot_time.timeline_changed = False
+                estimator.restart(boot_time.last_change)
+            estimator.update_global_position_int(msg, time_s)
+    return messages

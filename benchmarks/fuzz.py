@@ -4,7 +4,7 @@ The receive paths:
   * vehicle: ``SimulatedVehicle.receive`` (pymavlink parsing, signing checks, every message handler), with the
     physics stepped every few frames so hostile commands are also flown; once without and once with a signing
     key (with a key nothing fuzzed may arm it or change its mode: the fuzzer does not have the key);
-  * runner: ``autonomy.runner.receive_telemetry`` (the companion computer's pymavlink connection, VehicleLink,
+  * runner: ``autonomy.vehicle_time.receive_telemetry`` (the companion computer's pymavlink connection, VehicleLink,
     the Kalman filter) plus every reading the runner's state machine takes from the link.
 
 Frames: a corpus of valid frames of both directions (MAVLink 1 and 2, unsigned and signed with a key the targets
@@ -37,9 +37,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from autonomy.estimator import PoseEstimator  # noqa: E402
-from autonomy.vehicle_time import BootTimeMap  # noqa: E402
-from autonomy.runner import receive_telemetry  # noqa: E402
 from autonomy.vehicle_link import VehicleLink, enum_name  # noqa: E402
+from autonomy.vehicle_time import (
+    BootTimeMap,  # noqa: E402
+    receive_telemetry,  # noqa: E402
+)
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair  # noqa: E402
 from sitl_bridge.vehicle import DEFAULT_HOME, SimulatedVehicle, VehicleConfig  # noqa: E402
 
