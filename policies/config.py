@@ -83,9 +83,8 @@ class TrainConfig:
     low_level_gamma: float = 0.95
     """Discount of HRL-SAC's goal-conditioned low level (the paper preset: 0.99). Re-grounded goals make its
     return an endless chain of +1 per step of progress, so with 0.99 the critic's values (~100) dwarf the effect
-    of one action and the low level flew at a third of its speed; with 0.95 it flew straight at full speed
-    (HRL-SAC, seed 0, 40,000 steps: deterministic success 11 % against 5 % with 0.99 after 100,000 steps, test
-    split; docs/results/README.md)."""
+    of one action and the low level flies slowly; 0.95 keeps one action's effect visible (measurements:
+    docs/training.md, "How the defaults were chosen")."""
     tau: float = 0.005
     """Polyak rate of the target critics."""
     batch_size: int = 128
@@ -95,9 +94,7 @@ class TrainConfig:
     warmup_steps: int = 2_000
     """Environment steps with uniform random actions before learning starts."""
     updates_per_step: float = 0.5
-    """Gradient updates of the low-level SAC per environment step (1/num_envs = one per vector step). On the
-    easy missions of tests/test_learning.py (one run each, seed 0) HRL-SAC had not improved after 6,000 steps
-    at 0.25, and reached 75 % success after 8,000 at 1.0."""
+    """Gradient updates of the low-level SAC per environment step (1/num_envs = one per vector step)."""
     log_std_bounds: tuple[float, float] = (-20.0, 2.0)
     """Clip of the actor's log standard deviation (the paper's [-20, 2])."""
     target_entropy: float | None = None
@@ -107,27 +104,22 @@ class TrainConfig:
     side; the environment's range clips it. 0 = tanh maps exactly onto the range (the paper). At 0.25 the
     policy reaches full speed, the sensor fully on or the widest zoom at tanh 0.67 instead of tanh's saturation,
     where the entropy term holds the mean away from the bound and the critic's gradient vanishes. The critics
-    judge the clipped (flown) action. The exported artifact applies the same map and clip. Measured with
-    HRL-SAC over 3 seeds (comparison-v10 against v9): about +1 point on the val split, none on test (74.7 %)."""
+    judge the clipped (flown) action. The exported artifact applies the same map and clip."""
     initial_alpha: float = 0.2
     """Initial entropy temperature of both levels."""
     low_level_ignores: tuple[str, ...] = ("belief",)
     """Observation fields (``autonomy.observation.OBSERVATION_FIELDS`` names) that HRL-SAC's low-level actor and
     critics ignore: their inputs are multiplied by 0 (``networks.InputMask``), so the input stays 276 wide. Where
-    to search is the meta-controller's choice; seeing the coverage map, the deterministic low level flew at 0.22
-    of full speed on average (seed 0, 100,000 steps, 500 test episodes: 29.0 % success; masked: 59.4 %; a code
-    variant masking only the actor: 35.6 %; docs/results/README.md). Flat SAC ignores
-    this field (it plans the search itself). The paper preset: () (the low level sees everything). SarSearch-v0's
+    to search is the meta-controller's choice; a low level that sees the coverage map learns to dawdle over it
+    instead of flying to its goal. Flat SAC ignores this field (it plans the search itself). The paper preset: () (the low level sees everything). SarSearch-v0's
     map field is "coverage", v1's "belief"."""
 
     update_dtype: str = "bfloat16"
     """Precision of the hidden layers' matrix products in low-level / flat SAC updates: "bfloat16" (CPU autocast;
-    weights, Adam, outputs and losses stay float32, acting stays float32) or "float32" (the paper preset). On an
-    AMD EPYC (AVX-512 BF16) bfloat16 trains flat SAC at the default preset at 1.58x the float32 steps/s
-    (benchmarks/train_speed.py: 148.6 against 94.2; on an Intel Xeon with AVX-512 BF16 and AMX, 2026-12-02, only
-    1.06x: docs/training.md) and learned as well (HRL-SAC seed 0, 100,000 steps: 29.0 %
-    test success in both). On CPUs without AVX-512 BF16 or AMX it may be slower (not measured): try "float32"
-    there. The two round differently: each is reproducible, they are not bit-equal."""
+    weights, Adam, outputs and losses stay float32, acting stays float32) or "float32" (the paper preset).
+    bfloat16 is faster on CPUs with AVX-512 BF16 or AMX and learns as well; without them it may be slower: try
+    "float32" there (speeds: docs/training.md). The two round differently: each is reproducible, they are not
+    bit-equal."""
 
     # --- prioritised replay (both levels)
     per_alpha: float = 0.6
@@ -161,21 +153,18 @@ class TrainConfig:
     action (as an exported policy does), and the meta replay buffer is emptied when this phase starts (its
     transitions came from a low level still learning, with exploration noise). While both levels learn, the
     meta-controller's K-step returns depend on a moving low level; this phase gives it a fixed one. Steps of
-    this phase cost no low-level update, so they run several times faster. 0 = off. Measured (3 seeds, 500 test
-    episodes; docs/results/README.md): 100,000 of 200,000 steps alone, 70.9 % against 70.8 % without
-    (comparison-v8); with ``meta_keep_best``, 74.7 % (comparison-v9)."""
+    this phase cost no low-level update, so they run several times faster. 0 = off."""
     meta_joint_goals: str = "learned"
     """HRL-SAC's goals while both levels learn: "learned" (the meta-controller's, as in the paper) or "random"
     (uniform, as in the warm-up; the meta-controller then learns only in the meta-only phase, against the low level
-    it will fly with, so ``meta_only_steps`` must be above 0). On SarSearch-v1 learned goals collapsed onto
-    ReturnToBase within 25,000 steps (meta entropy 0.06 against a target of 1.23: hovering at home cost less per
-    segment than the early low level's exits and collisions), and the low level then learned little but hovering
-    (docs/results/README.md)."""
+    it will fly with, so ``meta_only_steps`` must be above 0). Random goals keep a meta-controller that learns
+    against an early, clumsy low level from collapsing onto the goal that costs least per segment (hovering at
+    home) while the low level still has everything to learn."""
     meta_returned_reward: float | None = None
     """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
     environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward
-    and its success are unchanged: only what the meta-controller learns from. Why: with +20 for any return after
-    a 50 m excursion, the meta-only phase collapsed onto ReturnToBase (docs/results/README.md, "SarSearch-v1")."""
+    and its success are unchanged: only what the meta-controller learns from. Why: +20 for any return after a
+    short excursion makes going home at once the meta-controller's easiest return."""
     meta_only_entropy_scale: float = 0.1
     """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
     that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
@@ -184,19 +173,17 @@ class TrainConfig:
     """Low-level reward towards the goal point g: "distance" is the paper's -||s' - g|| / intrinsic_scale_m;
     "progress" is (||s - g|| - ||s' - g||) / intrinsic_scale_m, the same signal as potential-based shaping.
     With "distance" every step costs, so ending the episode early by leaving the area (-10 once) beats a long
-    flight to a far goal: a pilot run learned exactly that (episodes of 13 steps). See docs/paper-notes.md."""
+    flight to a far goal. See docs/paper-notes.md."""
     intrinsic_scale_m: float = 10.0
-    """Metres per unit of intrinsic reward. 10 m makes a full-speed step towards g worth +1: at 100 m the signal
-    (+0.1) drowned in the entropy bonus and the low level hardly moved (HRL-SAC, seed 0, 40,000 steps)."""
+    """Metres per unit of intrinsic reward. 10 m makes a full-speed step towards g worth +1, well above the entropy
+    bonus."""
     cross_track_penalty: float = 0.0
     """Low-level reward minus this many times the distance flown across the line to g this step (metres, per
     ``intrinsic_scale_m``): the sideways part of the step, |d x u| for the step d and the unit vector u from the
     drone to g. The progress reward alone barely tells a heading 30 degrees off from a straight one (cos 30 = 0.87 of
     the progress); with 1, a full-speed step 30 degrees off earns 0.37 instead of 0.87. Routed goal points (round
     danger zones, inside the fence margin) are only safe flown straight. 0 = off, the default (the paper has no
-    such term); the comparison uses 1 (comparison-v11, docs/results/README.md): on seed 0's 300 val scenarios the
-    low level's heading fell from a median 12 to 7 degrees off its goal point, collisions from 4.3 % to 1.7 % and
-    fence exits from 4.0 % to 2.0 %; over 3 seeds the test success rose from 74.7 % to 80.5 %."""
+    such term); the comparison presets use 1."""
     intrinsic_goal_bonus: float = 1.0
     """Added to the intrinsic reward on the step the low level completes its sub-goal: it comes within reach of
     the point and the goal, grounded again, points elsewhere (the cell got searched, the search moved on).
@@ -207,14 +194,12 @@ class TrainConfig:
     about as much as a long flight, and a pilot run learned to leave (the time cost is the meta-controller's)."""
     coverage_bonus: float = 0.3
     """Low-level reward per newly covered grid cell (0 = none): the only part of the low-level reward that pays
-    for keeping the search sensor on (a cell counts as covered only with the sensor on). Measured, HRL-SAC,
-    default preset, 100,000 steps, 3 seeds, 500 test episodes: 0.1 -> 17.0 % success, the deterministic low level
-    keeping the sensor mostly off (detection 3.9 %); 0.3 -> 22.9 %, detection 16 % (seed 0); 1.0 -> 20.4 % (seed 0)."""
+    for keeping the search sensor on (a cell counts as covered only with the sensor on). Too small a bonus and the
+    deterministic low level keeps the sensor off."""
     coverage_by_intensity: bool = False
     """Each newly covered cell earns ``coverage_bonus`` times the search intensity it was covered with, instead of
     the whole bonus (the detection probability is proportional to the intensity, while a cell counts as covered at
-    any intensity >= 0.5). Off by default: on seed 0 (100,000 steps, 500 test scenarios) it raised the learned
-    intensity, as meant, but not the success (68.0 % against 72.6 % without; docs/results/README.md)."""
+    any intensity >= 0.5). Off by default: it raises the learned intensity, as meant, but not the success."""
     belief_bonus: float = 0.0
     """SarSearch-v1: low-level (and, with ``flat_shaping``, flat) reward plus this many times the belief the step's
     look removed (``info["belief_removed"]``): the chance, under the crew's own model, that the look found the
@@ -224,8 +209,7 @@ class TrainConfig:
     """SarSearch-v1: learning reward plus this many times the chance, under the crew's model, that the step's close
     look identified an unresolved candidate (``info["identify_chance"]``: the identification probability at the
     candidates' estimates, 0 above the close-look speed). It pays for what a close look needs (a hover, zoom,
-    the sensor on) where the goal bonus pays only once the candidate is resolved. 0 = off (the shipped runs: 50,
-    docs/results/README.md)."""
+    the sensor on) where the goal bonus pays only once the candidate is resolved. 0 = off."""
     flat_shaping: bool = False
     """Flat SAC learns from the shaping the HRL low level gets, towards the observation's target (TrackObject's
     point: a candidate, else the most probable place): the progress to it, the cross-track penalty, the coverage
@@ -239,16 +223,14 @@ class TrainConfig:
     detection probability where it is in the camera's view, 0 once it has been detected): the expected value of
     the detection the search is for, which pays for what the sensor settings do (intensity, zoom against the
     footprint's width) where the coverage bonus cannot tell. The probability uses the hidden victim, as the
-    environment's own reward does; it is a training signal only, never an input. 0 = off, the default: at 5 it
-    kept the sensor on more, but 3 seeds reached 67.9 % test success against 70.8 % without (comparison-v7,
-    docs/results/README.md)."""
+    environment's own reward does; it is a training signal only, never an input. 0 = off, the default: it keeps
+    the sensor on more without a better success."""
     coverage_swept: bool = False
     """The coverage bonus counts the ground the camera footprint swept this step (distance flown x footprint
     width, in grid cells, sensor on) instead of the newly covered cells. The low level does not see the coverage
     map, so whether a cell is new is noise to it; the swept ground pays directly for what it controls: speed, the
-    sensor switched on and a wide footprint (zoom out). Where to search stays the goals' business. Off by default:
-    seed-0 probes only, with ``coverage_by_intensity``: 64.6 % at coverage_bonus 0.3, 72.4 % at 0.6, against
-    71.4 % for the default (docs/results/README.md)."""
+    sensor switched on and a wide footprint (zoom out). Where to search stays the goals' business. Off by default
+    (probed on one seed only, no gain)."""
 
     # --- bookkeeping
     checkpoint_every: int = 20_000

@@ -11,8 +11,7 @@ two new ends:
 
 * no cost per step and none for the action (the paper's -0.1 and -0.01 ||a||^2): time and energy are the
   endurance now, and a running cost made giving up the best policy as soon as success looked unlikely, since
-  coming home ends the episode (measured: in a meta-only phase on SarSearch-v1 with them, HRL-SAC's val success
-  fell from 29.5 % to 2.5 % while its training return rose from -68 to -55; docs/results/README.md);
+  coming home ends the episode (measured: docs/training.md, "How the defaults were chosen");
 * +100 when the drone is within the reach radius of the victim once a close look has confirmed it;
 * -50 inside a danger zone, -10 outside the geofence;
 * -50 when the endurance runs out away from home (``ran_dry``: the drone is lost);

@@ -51,8 +51,8 @@ def shaped_reward(config: TrainConfig, hrl: bool, actions: np.ndarray, info: dic
            + cfg.detection_bonus * info.get("first_detection_chance", 0.0))
     if hrl:
         # The bonus pays for completing g (info["goal_completed"]), not for being within reach of it: over an
-        # unsearched cell with the sensor off the goal stays put, and a bonus for arriving paid every step of
-        # hovering there (3 seeds: 22.9 % test success that way, 28.6 % this way; docs/results/README.md).
+        # unsearched cell with the sensor off the goal stays put, and a bonus for arriving would pay every step of
+        # hovering there (measured: docs/training.md, "How the defaults were chosen").
         return (out + cfg.intrinsic_goal_bonus * info["goal_completed"]
                 + cfg.extrinsic_weight * (reward - step_reward))
     return out + (reward - step_reward)
