@@ -85,10 +85,6 @@ class LinkLossMonitor:
         """Whether the vehicle is silent now (for at least ``gap_s``)."""
         return bool(self.silences) and self.silences[-1].end_s is None
 
-    def silent_for_s(self, now_s: float) -> float:
-        """How long the current silence has lasted (0 when the link is up)."""
-        return now_s - self.silences[-1].start_s if self.link_down() else 0.0
-
     def failsafe_evidence(self, now_s: float, mode: str | None) -> str | None:
         """Why a switch to ``mode`` seen at ``now_s`` is the vehicle's own link-loss failsafe, in words; None when
         nothing says so (then it is a pilot's mode change)."""

@@ -46,7 +46,6 @@ __all__ = ["Clock", "MissionAborted", "MissionRunner", "RunnerConfig", "WallCloc
 
 POSITION_RATE_HZ = 10.0
 STREAM_REQUEST_PERIOD_S = 2.0  # before arming, missing streams and HOME_POSITION are asked for again this often
-STATES = ("CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE")
 
 
 class MissionAborted(RuntimeError):

@@ -45,6 +45,6 @@ def test_the_flight_walkthrough_names_the_functions_it_follows():
 
     for owner, name in ((MissionRunner, "_search"), (MissionRunner, "_apply"), (MissionRunner, "tick"),
                         (PoseEstimator, "predict_to"), (SearchPilot, "decide"), (DecisionWorker, "submit"),
-                        (Policy, "select_goal"), (Policy, "act"), (Policy, "goal_due")):
+                        (Policy, "select_goal"), (Policy, "act")):
         assert callable(getattr(owner, name)), f"{owner.__name__}.{name}"
     assert callable(receive_telemetry) and goal_due(60, 30) and not goal_due(61, 30)

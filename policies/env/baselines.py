@@ -28,7 +28,7 @@ tuned on the val split (``benchmarks/tune_baselines.py``; the defaults are its c
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -256,11 +256,6 @@ BASELINES: dict[str, Callable[..., object]] = {
     "greedy_bayes": GreedyBayes,
 }
 """SarSearch-v1's scripted searchers by name; each takes (core, settings)."""
-
-
-def with_settings(settings: ScriptedSettings, **changes) -> ScriptedSettings:
-    """A copy of ``settings`` with ``changes`` (validated)."""
-    return replace(settings, **changes)
 
 
 TUNED: dict[str, ScriptedSettings] = {

@@ -13,7 +13,6 @@ detection streams, every constant goal under each HRL-SAC run's learned low leve
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import TextIO
 
@@ -157,10 +156,6 @@ def plot_found_by(rows: list[dict], path: Path, times=FOUND_BY_S) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
     save_figure(fig, path)
-
-
-def progress_stream(progress) -> TextIO | None:
-    return sys.stderr if progress is True else (progress or None)
 
 
 def check_task(runs: list[Run]) -> str:
