@@ -10,8 +10,10 @@ import sys
 from pathlib import Path
 from typing import Callable
 
+from hrlsac_cli import GROUPS
+
 DEFAULT_OUT = Path("mission-output")
-RUN_SUMMARY = "fly the mission on a MAVLink vehicle in real time"
+RUN_SUMMARY = GROUPS["mission"]["run"][1]  # written once, in the dispatcher's table (``hrlsac mission --help``)
 
 
 def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.ArgumentParser:

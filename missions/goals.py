@@ -69,12 +69,22 @@ def cell_centres(area: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
     return north, east
 
 
-def _argmax_point(score: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
-    """The (north, east) of each search's best cell; score is (N, R, C), north (N, R), east (N, C)."""
+def _distance_to_cells(north: np.ndarray, east: np.ndarray, agent_ne: np.ndarray) -> np.ndarray:
+    """(N, R, C) metres from each drone to every cell centre (north (N, R), east (N, C))."""
+    return np.hypot(north[:, :, None] - agent_ne[:, 0, None, None], east[:, None, :] - agent_ne[:, 1, None, None])
+
+
+def _best_point(score: np.ndarray, north: np.ndarray, east: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """The (north, east) of each search's best cell; score is (N, R, C), north (N, R), east (N, C). A search with
+    no finite score (nothing left to search) gets its ``fallback`` point instead."""
     n, rows, cols = score.shape
-    best = score.reshape(n, -1).argmax(axis=1)
+    flat = score.reshape(n, -1)
+    best = flat.argmax(axis=1)
     index = np.arange(n)
-    return np.stack([north[index, best // cols], east[index, best % cols]], axis=1)
+    point = np.stack([north[index, best // cols], east[index, best % cols]], axis=1)
+    nothing_left = ~np.isfinite(flat.max(axis=1))
+    point[nothing_left] = fallback[nothing_left]
+    return point
 
 
 def explore_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -83,30 +93,23 @@ def explore_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray, 
     uncovered = 1.0 - coverage.reshape(n, BLOCKS, side, BLOCKS, side).mean(axis=(2, 4))
     north, east = cell_centres(area, BLOCKS)
     diagonal = np.hypot(area[:, 1] - area[:, 0], area[:, 3] - area[:, 2])[:, None, None]
-    distance = np.hypot(north[:, :, None] - agent_ne[:, 0, None, None], east[:, None, :] - agent_ne[:, 1, None, None])
+    distance = _distance_to_cells(north, east, agent_ne)
     score = np.where(uncovered >= 0.5, uncovered - DISTANCE_WEIGHT * distance / diagonal, -np.inf)
-    point = _argmax_point(score, north, east)
-    nothing_left = ~np.isfinite(score.reshape(n, -1).max(axis=1))
-    point[nothing_left] = fallback[nothing_left]
-    return point
+    return _best_point(score, north, east, fallback)
 
 
 def search_location_point(agent_ne: np.ndarray, area: np.ndarray, coverage: np.ndarray, datum: np.ndarray,
                           datum_sigma: np.ndarray) -> np.ndarray:
-    n, grid = coverage.shape[0], coverage.shape[1]
+    grid = coverage.shape[1]
     north, east = cell_centres(area, grid)
     sigma2 = 2.0 * np.maximum(datum_sigma, 1.0)[:, None, None] ** 2
     # log of prior x travel discount, so that far cells compare without underflowing to 0
     log_score = -((north[:, :, None] - datum[:, 0, None, None]) ** 2
                   + (east[:, None, :] - datum[:, 1, None, None]) ** 2) / sigma2
-    log_score -= np.hypot(north[:, :, None] - agent_ne[:, 0, None, None],
-                          east[:, None, :] - agent_ne[:, 1, None, None]) / TRAVEL_SCALE_M
+    log_score -= _distance_to_cells(north, east, agent_ne) / TRAVEL_SCALE_M
     uncovered = 1.0 - coverage
     score = np.where(uncovered > 0.0, log_score + np.log(np.maximum(uncovered, 1e-30)), -np.inf)
-    point = _argmax_point(score, north, east)
-    exhausted = ~np.isfinite(score.reshape(n, -1).max(axis=1))
-    point[exhausted] = datum[exhausted]
-    return point
+    return _best_point(score, north, east, datum)
 
 
 def route_around_hazards(agent_ne: np.ndarray, point: np.ndarray, obstacles: np.ndarray, obstacle_valid: np.ndarray,
@@ -205,16 +208,12 @@ def belief_point(agent_ne: np.ndarray, area: np.ndarray, belief: np.ndarray, off
                  fallback: np.ndarray) -> np.ndarray:
     """SarSearch-v1's SearchSpecificLocation: the cell with the most belief per travel, log belief - distance /
     TRAVEL_SCALE_M, at its centre where its water is now (``offset``, ``missions.belief``)."""
-    n, grid = belief.shape[0], belief.shape[1]
+    grid = belief.shape[1]
     north, east = cell_centres(area, grid)
     north, east = north + offset[:, 0:1], east + offset[:, 1:2]
-    log_score = np.log(np.maximum(belief, BELIEF_FLOOR)) - np.hypot(
-        north[:, :, None] - agent_ne[:, 0, None, None], east[:, None, :] - agent_ne[:, 1, None, None]) / TRAVEL_SCALE_M
+    log_score = np.log(np.maximum(belief, BELIEF_FLOOR)) - _distance_to_cells(north, east, agent_ne) / TRAVEL_SCALE_M
     score = np.where(belief > BELIEF_FLOOR, log_score, -np.inf)
-    point = _argmax_point(score, north, east)
-    exhausted = ~np.isfinite(score.reshape(n, -1).max(axis=1))
-    point[exhausted] = fallback[exhausted]
-    return point
+    return _best_point(score, north, east, fallback)
 
 
 def candidate_point(agent_ne: np.ndarray, candidates: np.ndarray, kind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

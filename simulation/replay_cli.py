@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from autonomy.mission_cli import mission_parser, prepare_mission
+from hrlsac_cli import GROUPS
 
 # mission_replay at the top, though only the workers use it: on an on-board install (no OpenCV for the replay's
 # pictures) the command then says at once which extra it needs, before it reads any file.
@@ -18,7 +19,7 @@ from simulation import mission_replay  # noqa: F401
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
-REPLAY_SUMMARY = "fly the mission in the simulated vehicle, in lockstep (deterministic)"
+REPLAY_SUMMARY = GROUPS["mission"]["replay"][1]  # written once, in the dispatcher's table
 
 
 def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
