@@ -1,4 +1,5 @@
-"""The runner's two clocks, one code path: simulated lockstep time (simulation.mission_replay.VehicleClock) or real time."""
+"""The runner's two clocks, one code path: simulated lockstep time (simulation.mission_replay.VehicleClock) or real
+time."""
 from __future__ import annotations
 
 import time

@@ -4,14 +4,14 @@ A companion computer has the artifact and this package, not the training code: n
 ``policies`` (or gymnasium); tests/test_export.py loads and runs an artifact with ``policies`` hidden.
 
 Before any weight is loaded, :func:`load_policy` checks the file (a zip archive, complete, its SHA-256 seal
-intact: ``autonomy.artifact_seal``) and its manifest (a format version this runtime knows, the same observation layout as
-``autonomy.observation``, the same goals as ``missions.goals``). Whatever is wrong is raised as one
+intact: ``autonomy.artifact_seal``) and its manifest (a format version this runtime knows, the same observation
+layout as ``autonomy.observation``, the same goals as ``missions.goals``). Whatever is wrong is raised as one
 :class:`PolicyArtifactError` whose message is one line naming the file and the problem: flying a policy that
 reads a different observation than the one it is given would fail silently, so a mismatch is refused.
 
-The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step (``missions.goals.goal_due(step, subgoal_interval)``) first
-``select_goal(meta_obs)``, then the runner grounds the goal to a point (``missions.goals``), rebuilds the
-observation and acts on it. Both are deterministic (the mode of each policy).
+The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step
+(``missions.goals.goal_due(step, subgoal_interval)``) first ``select_goal(meta_obs)``, then the runner grounds the
+goal to a point (``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of each policy).
 """
 from __future__ import annotations
 

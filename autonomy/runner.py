@@ -9,7 +9,7 @@ PX4's OFFBOARD or ArduPilot's GUIDED, and take-off, mode requests and failsafes 
 Heights are above the vehicle's home (HOME_POSITION), and a mission whose launch point disagrees with that home is
 refused before arming (:mod:`autonomy.preflight`). A link outage during SEARCH holds the drone (zero velocity) and
 pauses decisions until telemetry is back; a mode change that the vehicle's own link-loss failsafe made is followed by
-a resumption of the search, a pilot's mode change ends it (:mod:`autonomy.link_loss`).
+a resumption of the search, a pilot's mode change ends it (:mod:`autonomy.link_loss`, :mod:`autonomy.failsafes`).
 
 Time belongs to a :class:`Clock`: in lockstep replay it is the simulated vehicle's (``advance`` steps the
 vehicle one physics tick), against a real vehicle it is the wall clock (``advance`` sleeps one tick). Every
@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from autonomy.autopilots import PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
 from autonomy.estimator import PoseEstimator
+from autonomy.failsafes import blind_reason, judge_search
 from autonomy.geofence import guard_velocity
 from autonomy.link_loss import LinkLossMonitor
 from autonomy.mission_report import mission_report
@@ -265,13 +266,7 @@ class MissionRunner:
                 self.tick()
 
     def _blind(self, now: float) -> str | None:
-        """Why the runner cannot see where the drone is now (None when it can): no telemetry for a while, or no
-        position fused for longer than the estimator trusts (a policy or the fence guard must not act on a pose
-        extrapolated over a gap, as after an autopilot reboot)."""
-        if self.link_loss.link_down():
-            return f"no telemetry for {self.config.link_loss.gap_s:g} s"
-        pose = self.estimator.predict_to(now)
-        return f"no position fused for {pose.age_s:.1f} s" if pose.stale else None
+        return blind_reason(now, self.link_loss, self.estimator, self.config.link_loss.gap_s)
 
     def _apply(self, decision: Decision, now: float) -> None:
         self.decisions.append(decision)
@@ -298,43 +293,24 @@ class MissionRunner:
         self._set_zoom(decision.zoom)
 
     def _check_failsafes(self, now: float) -> None:
+        """Act on ``autonomy.failsafes.judge_search``: wait for lost telemetry (said once), end or resume."""
         if self.search_end is not None:
             return
-        last, waiting = self.link.last_vehicle_message_s, self.config.link_loss
-        silent_s = now - last if last is not None else 0.0
         resumed_s = max(self._last_decision_s, self.transitions[-1]["time_s"], self._link_back_s)
-        mode, companion = self.link.flight_mode, self.flavour.companion_mode
-        if silent_s > self.config.telemetry_timeout_s:
-            if waiting.resume and silent_s <= waiting.wait_s:
-                if not self._waiting_reported:
-                    self._waiting_reported = True
-                    self._event("link", f"telemetry lost for {silent_s:.1f} s: waiting up to {waiting.wait_s:g} s "
-                                        "for it to come back")
-                return
-            self._event("failsafe", f"telemetry lost for {silent_s:.1f} s")
-            self.search_end = "telemetry lost"
+        verdict = judge_search(now, self.link, self.config, self.flavour, self.link_loss, self.boot_time, resumed_s)
+        if verdict is not None and verdict.action == "wait":
+            if not self._waiting_reported:
+                self._waiting_reported = True
+                self._event("link", verdict.message)
             return
         self._waiting_reported = False
-        if self.link_loss.link_down():
-            return  # holding until telemetry is back: the checks below need a live link
-        if not self.link.armed:  # in flight: a reboot or a crash; there is nothing to resume or to bring home
-            rebooted = f" ({self.boot_time.last_change})" if self.boot_time.timeline_changes else ""
-            self._event("failsafe", f"the vehicle is disarmed{rebooted}")
-            self.search_end = "vehicle disarmed"
-        elif now - resumed_s > self.config.policy_stall_rtl_s:
-            self._event("failsafe", f"no policy decision for {self.config.policy_stall_rtl_s:g} s: RTL")
-            self.search_end = "policy stalled"
-        elif (battery := self.link.battery_percent()) is not None and battery <= self.config.low_battery_pct:
-            self._event("failsafe", f"battery at {battery:g} %: RTL")
-            self.search_end = "low battery"
-        elif mode != companion:
-            evidence = self.link_loss.failsafe_evidence(now, mode)
-            if evidence is not None and self.link_loss.may_resume():
-                self._resume(mode, evidence)
-                return
-            used_up = f"; {evidence}, but no resumption is left" if evidence is not None else ""
-            self._event("failsafe", f"the vehicle left {companion} (now {mode}){used_up}")
-            self.search_end = f"vehicle switched to {mode}"
+        if verdict is None:
+            return
+        if verdict.action == "resume":
+            self._resume(verdict.mode, verdict.evidence)
+        else:
+            self._event("failsafe", verdict.message)
+            self.search_end = verdict.search_end
 
     def _resume(self, mode: str, evidence: str) -> None:
         """After the vehicle's own link-loss failsafe: stream again, ask for the companion mode again and carry on
