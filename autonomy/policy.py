@@ -11,7 +11,8 @@ reads a different observation than the one it is given would fail silently, so a
 
 The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step
 (``missions.goals.goal_due(step, subgoal_interval)``) first ``select_goal(meta_obs)``, then the runner grounds the
-goal to a point (``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of each policy).
+goal to a point (``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of
+each policy).
 """
 from __future__ import annotations
 
