@@ -9,10 +9,9 @@ layout as ``autonomy.observation``, the same goals as ``missions.goals``). Whate
 :class:`PolicyArtifactError` whose message is one line naming the file and the problem: flying a policy that
 reads a different observation than the one it is given would fail silently, so a mismatch is refused.
 
-The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step
-(``missions.goals.goal_due(step, subgoal_interval)``) first ``select_goal(meta_obs)``, then the runner grounds the
-goal to a point (``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of
-each policy).
+The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step (``goal_due(step)``, which asks
+``missions.goals.goal_due``) first ``select_goal(meta_obs)``, then the runner grounds the goal to a point
+(``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of each policy).
 """
 from __future__ import annotations
 
@@ -30,6 +29,7 @@ from autonomy.artifact_seal import SealError, ends_with_zip_end, is_sealed, unse
 from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
+from missions.goals import goal_due
 
 ZIP_MAGIC = b"PK\x03\x04"
 # Names of the two programs in a torch-export artifact (a PT2 archive). "model" is the name plain
@@ -64,6 +64,12 @@ class Policy:
     def subgoal_interval(self) -> int | None:
         """K: steps between goal decisions (None for a flat policy)."""
         return self.manifest.subgoal_interval
+
+    def goal_due(self, step: int) -> bool:
+        """Whether the meta-controller decides at this step of a mission (``missions.goals.goal_due``: steps 0, K,
+        2K, ...); never for a flat policy. For loops of your own (docs/export.md); the flight pilot asks the same
+        function."""
+        return self.hierarchical and bool(goal_due(step, self.manifest.subgoal_interval))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         """(N, 284) or (284,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""

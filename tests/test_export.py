@@ -238,7 +238,9 @@ def test_refuses_files_that_are_not_policy_artifacts(tmp_path):
 def test_runtime_exposes_the_hierarchy(artifacts, recorded):
     hierarchical, flat = load_policy(artifacts["hrl-sac", "torchscript"]), load_policy(artifacts["sac", "torchscript"])
     assert hierarchical.subgoal_interval == K and flat.subgoal_interval is None
+    assert [step for step in range(25) if hierarchical.goal_due(step)] == [0, 10, 20]
     assert [step for step in range(25) if goal_due(step, hierarchical.subgoal_interval)] == [0, 10, 20]
+    assert not any(flat.goal_due(step) for step in range(25))
     obs = recorded["hrl-sac"][:3]
     action, goal = hierarchical.act(obs[0]), hierarchical.select_goal(obs[0, :META_OBS_DIM])
     assert action.shape == (4,) and action.dtype == np.float32
