@@ -205,6 +205,40 @@ def test_cross_track_is_the_sideways_part_of_the_step():
     np.testing.assert_allclose(cross_track_m(start, end, goal), [4.0, 4.0, 5.0, 0.0])
 
 
+@pytest.mark.parametrize("task, goal_conditioned", [("SarSearch-v0", True), ("SarSearch-v1", True),
+                                                     ("SarSearch-v1", False)])
+def test_the_step_info_says_where_the_step_started(task, goal_conditioned):
+    """The learning rewards read only the step's info: its start entries are the state before the step, taken
+    independently here from the batch before stepping it."""
+    from policies.env.core import SarSearchConfig
+    from policies.env.vector import SarSearchVectorEnv
+
+    env = SarSearchVectorEnv(3, SarSearchConfig(task=task, split="val", goal_conditioned=goal_conditioned))
+    env.reset(seed=[0, 1, 2])
+    if goal_conditioned:
+        env.set_goals(np.array([0, 1, 2]))
+    rng, added = np.random.default_rng(0), 0.0
+    for _ in range(4):
+        core = env.core
+        position = core.position.copy()
+        target = (core.goal_point if goal_conditioned else core.target_position(False)).copy()
+        searched = np.array(core.searched_cells, dtype=np.float64)
+        area = core.scen.area.copy()
+        actions = rng.uniform(-1.0, 1.0, size=(3, 4)).astype(np.float32)
+        actions[:, 2] = 1.0  # sensor on: the step covers cells
+        _, _, terminated, truncated, info = env.step(actions)
+        assert not (terminated | truncated).any()
+        np.testing.assert_array_equal(info["start_position"], position)
+        np.testing.assert_array_equal(info["step_target"], target)
+        np.testing.assert_array_equal(info["newly_searched_cells"], info["searched_cells"] - searched)
+        cells = core.coverage[0].size
+        np.testing.assert_allclose(info["cell_area_m2"], (area[:, 1] - area[:, 0]) * (area[:, 3] - area[:, 2]) / cells)
+        assert not np.array_equal(info["position"], position)
+        added += info["newly_searched_cells"].sum()
+    assert added > 0
+    assert env.step_reward == (-0.1 if task == "SarSearch-v0" else 0.0)
+
+
 def test_flat_sac_learns_from_the_environment_reward(tmp_path):
     config = small_config("sac")
     trainer = Trainer(config, tmp_path)
