@@ -24,7 +24,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from missions.mission import FlightSettings, Mission
-from missions.mission_file import load_mission, save_mission
+from missions.mission_file import load_mission
+from missions.mission_writer import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.evaluation.parallel import evaluate_checkpoint
 from policies.reports.sweep_table import DONE, FAILED, SKIPPED, ProgressTable, RunStatus, render
