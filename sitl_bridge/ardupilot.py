@@ -30,7 +30,8 @@ from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY,
     MASK_YAW, MASK_YAW_RATE, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v,
     body_to_ned, consumed_mah)
-from sitl_bridge.dynamics import HOVER, MultirotorParams, VehicleState, VelocityCommand, velocity_toward
+from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
 FORCE_ARM_MAGIC = 2989  # GCS_MAVLINK::magic_force_arm_value

@@ -14,7 +14,8 @@ from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
     MASK_YAW_RATE, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent, FlightStatus, Setpoint, as_int,
     body_to_ned)
-from sitl_bridge.dynamics import HOVER, MultirotorParams, VehicleState, VelocityCommand, velocity_toward
+from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_modes import FlightMode, base_mode
 

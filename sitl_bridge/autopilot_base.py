@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.dynamics import MultirotorParams, VehicleState, VelocityCommand
+from sitl_bridge.multirotor import MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED

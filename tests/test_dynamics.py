@@ -12,12 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sitl_bridge.dynamics import (
-    HOVER,
     BatchState,
-    MultirotorParams,
-    VehicleState,
-    VelocityCommand,
-    Wind,
     attitude,
     clamp_command,
     ground_velocity,
@@ -26,6 +21,8 @@ from sitl_bridge.dynamics import (
     step_batch,
     velocity_toward,
 )
+from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
+from sitl_bridge.wind import Wind
 
 PARAMS = MultirotorParams()
 CALM = Wind()

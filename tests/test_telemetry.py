@@ -8,10 +8,10 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, ned_from_geodetic
 from sitl_bridge import telemetry
-from sitl_bridge.dynamics import Wind
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import VehicleConfig
+from sitl_bridge.wind import Wind
 
 
 def received(pilot: LockstepPilot, msg_type: str, since: int = 0) -> list:
