@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from missions.coverage import GRID_SIZE, OBS_GRID, cover, coverage_ratio, downsample_coverage, grid_cell
 from missions.generator import generate_scenario
 from missions.mission import Mission
 from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay,
                                Weather)
-from missions.search import (GRID_SIZE, LEEWAY, OBS_GRID, SEA_FACTOR, SEA_FACTOR_BY_CATEGORY, ScenarioBatch,
-                             cover, coverage_ratio, detected_categories, detection_probability, distance_to_primary,
-                             downsample_coverage, drift_targets, footprint_half_width_m, grid_cell, inside_obstacle,
-                             outside_fence, sample_detections, target_drift_velocity, target_reached)
+from missions.search import (LEEWAY, SEA_FACTOR, SEA_FACTOR_BY_CATEGORY, ScenarioBatch, detected_categories,
+                             detection_probability, distance_to_primary, drift_targets, footprint_half_width_m,
+                             inside_obstacle, outside_fence, sample_detections, target_drift_velocity, target_reached)
 
 AREA = np.array([[-50.0, 950.0, -500.0, 500.0]])
 PERSON, BOAT = CATEGORIES.index("person"), CATEGORIES.index("boat")
