@@ -13,7 +13,7 @@ from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile
-from sitl_bridge.vehicle import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
+from sitl_bridge.vehicle_config import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
 from sitl_bridge.wind import Wind
 
 FAILSAFE_ACTIONS = {"hold": 5, "posctl": 0, "land": 4, "rtl": 3}
