@@ -26,9 +26,10 @@ home's position and rotation basis so that each conversion is a handful of scala
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 from functools import lru_cache
+
+from missions.validation import FINITE, check_fields
 
 WGS84_A_M = 6378137.0
 """Semi-major axis (equatorial radius) of the WGS-84 ellipsoid, metres."""
@@ -65,19 +66,7 @@ class GeoPoint:
     alt_m: float = 0.0
 
     def __post_init__(self) -> None:
-        _check_real("lat_deg", self.lat_deg, -90.0, 90.0, "deg")
-        _check_real("lon_deg", self.lon_deg, -180.0, 180.0, "deg")
-        _check_real("alt_m", self.alt_m, -math.inf, math.inf, "m")
-
-
-def _check_real(name: str, value: object, low: float, high: float, unit: str) -> None:
-    """Raise if ``value`` is not a finite real number within [low, high]."""
-    allowed = f"a finite number in [{low:g}, {high:g}] {unit}"
-    # bool is an int subclass; GeoPoint(True, ...) is surely a bug, not latitude 1.
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"GeoPoint.{name} must be {allowed}, got {value!r}")
-    if not (math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"GeoPoint.{name} must be {allowed}, got {value!r}")
+        check_fields(self, (("lat_deg", -90.0, 90.0), ("lon_deg", -180.0, 180.0), ("alt_m", FINITE)))
 
 
 def geodetic_to_ecef(lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:

@@ -11,6 +11,7 @@ import numpy as np
 
 from missions.geodesy import GeoPoint
 from missions.scenario import Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay, Weather
+from missions.validation import check_fields, check_number
 from missions.yolo_labels import YoloItem
 
 
@@ -43,22 +44,14 @@ class ImageScenarioConfig:
     """Sea currents are drawn with speeds uniform in [0, max_current_mps] (m/s). Allowed [0, 5]."""
 
     def __post_init__(self) -> None:
-        def check(name: str, value: object, low: float, high: float) -> None:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not low <= value <= high:
-                raise ValueError(f"ImageScenarioConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
-
-        check("width_m", self.width_m, 10.0, 1e5)
-        if self.height_m is not None:
-            check("height_m", self.height_m, 10.0, 1e5)
-            check("south_margin_m", self.south_margin_m, 0.0, self.height_m)
-        else:
-            check("south_margin_m", self.south_margin_m, 0.0, 1e5)
-        check("min_obstacle_radius_m", self.min_obstacle_radius_m, 0.1, 1e4)
-        check("max_current_mps", self.max_current_mps, 0.0, 5.0)
+        # With the height left to the image, the margin is checked against it in area_for.
+        height = (("height_m", 10.0, 1e5), ("south_margin_m", 0.0, self.height_m)) if self.height_m is not None \
+            else (("south_margin_m", 0.0, 1e5),)
+        check_fields(self, (("width_m", 10.0, 1e5), *height, ("min_obstacle_radius_m", 0.1, 1e4),
+                            ("max_current_mps", 0.0, 5.0)))
         low, high = self.datum_sigma_m
-        check("datum_sigma_m[0]", low, 0.0, 1e5)
-        check("datum_sigma_m[1]", high, low, 1e5)
+        check_number("ImageScenarioConfig", "datum_sigma_m[0]", low, 0.0, 1e5)
+        check_number("ImageScenarioConfig", "datum_sigma_m[1]", high, low, 1e5)
 
     def area_for(self, item: YoloItem) -> SearchArea:
         """The search area an image spans: centred east-west on home, south edge south_margin_m south of it."""

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+
+from missions.validation import NON_NEGATIVE, POSITIVE, Interval, check_fields
 
 GRAVITY_MPS2 = 9.80665
 
@@ -28,18 +30,11 @@ class MultirotorParams:
     idle_power_w: float = 10.0  # armed, resting on the ground, W
 
     def __post_init__(self) -> None:
-        non_negative = {"gust_response", "drag_tilt_per_mps2", "power_per_airspeed2_w",
-                        "climb_power_w_per_mps", "idle_power_w"}
-        for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if name == "gust_response":
-                if not 0.0 <= value <= 1.0:
-                    raise ValueError(f"MultirotorParams.{name} must be in [0, 1], got {value}")
-            elif name in non_negative:
-                if not 0.0 <= value < math.inf:
-                    raise ValueError(f"MultirotorParams.{name} must be finite and >= 0, got {value}")
-            elif not 0.0 < value < math.inf:
-                raise ValueError(f"MultirotorParams.{name} must be finite and > 0, got {value}")
+        # Limits, time constants, capacity and hover power must be > 0; the rest may be 0 (no effect).
+        may_be_zero = {"drag_tilt_per_mps2": NON_NEGATIVE, "power_per_airspeed2_w": NON_NEGATIVE,
+                       "climb_power_w_per_mps": NON_NEGATIVE, "idle_power_w": NON_NEGATIVE,
+                       "gust_response": Interval(0.0, 1.0)}
+        check_fields(self, ((f.name, may_be_zero.get(f.name, POSITIVE)) for f in fields(self)))
 
 
 @dataclass(frozen=True, slots=True)

@@ -57,10 +57,8 @@ class VehicleConfig:
     """How long a reboot keeps the autopilot silent, motors off (s, [0.1, 600]); it then boots afresh."""
 
     def __post_init__(self) -> None:
-        if not 100.0 <= self.physics_rate_hz <= 2000.0:
-            raise ValueError(f"physics_rate_hz must be in [100, 2000], got {self.physics_rate_hz}")
-        if not 1 <= self.system_id <= 250:
-            raise ValueError(f"system_id must be in [1, 250], got {self.system_id}")
+        check_fields(self, (("physics_rate_hz", 100.0, 2000.0), ("system_id", 1, 250), ("boot_time_s", 0.0, 1e7),
+                            ("reboot_downtime_s", 0.1, 600.0)), integers=("system_id",))
         if self.signing_key is not None and len(self.signing_key) != KEY_BYTES:
             raise ValueError(f"signing_key must be {KEY_BYTES} bytes, got {len(self.signing_key)}; "
                              "load it with missions.signing.load_key_file")
@@ -70,6 +68,5 @@ class VehicleConfig:
         if self.telemetry_profile not in PROFILES:
             raise ValueError(f"VehicleConfig.telemetry_profile must be one of {', '.join(PROFILES)}, "
                              f"got {self.telemetry_profile!r}")
-        check_fields(self, (("boot_time_s", 0.0, 1e7), ("reboot_downtime_s", 0.1, 600.0)))
         if self.reboot_at_s is not None:
             check_number(type(self).__name__, "reboot_at_s", self.reboot_at_s, 0.0, 1e7)

@@ -9,6 +9,7 @@ import math
 import random
 from dataclasses import dataclass, field
 
+from missions.validation import FINITE, NON_NEGATIVE, check_fields
 from sitl_bridge.multirotor import MultirotorParams
 from sitl_bridge.scalar_math import ScalarMath
 
@@ -37,11 +38,7 @@ class Wind:
     _terms: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for name in ("north_mps", "east_mps"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"Wind.{name} must be finite, got {getattr(self, name)}")
-        if not 0.0 <= self.gust_mps < math.inf:
-            raise ValueError(f"Wind.gust_mps must be finite and >= 0, got {self.gust_mps}")
+        check_fields(self, (("north_mps", FINITE), ("east_mps", FINITE), ("gust_mps", NON_NEGATIVE)))
         rng = random.Random(self.seed)
         log_lo, log_hi = (math.log(p) for p in GUST_PERIOD_RANGE_S)
         terms = []

@@ -250,7 +250,7 @@ ERRORS = {
     "visibility range": (changed(scenario__conditions__visibility=0.1),
                          "scenario.conditions.visibility: must be a number in [0.3, 1], got 0.1"),
     "latitude range": (changed(scenario__home__lat_deg=100),
-                       "scenario.home.lat_deg: must be a finite number in [-90, 90] deg, got 100"),
+                       "scenario.home.lat_deg: must be a number in [-90, 90], got 100"),
     "both inline and generator": (changed(scenario__generator={"split": "test", "index": 3}),
                                   f"scenario: {EXACTLY_ONE} generator and inline fields ({ALL_INLINE})"),
     "generator and dataset": (changed(scenario={"generator": {"seed": 1}, "dataset": {"root": "."}}),
