@@ -25,13 +25,6 @@ SENSOR_ON_INTENSITY = 0.5
 """Search intensity at or above which the sensor counts as on for coverage."""
 
 
-def grid_cell(area: np.ndarray, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(row, col) int64 arrays of the cells containing (north, east), clipped to [0, GRID_SIZE - 1]."""
-    row = np.floor((north - area[:, 0]) * (GRID_SIZE / (area[:, 1] - area[:, 0])))
-    col = np.floor((east - area[:, 2]) * (GRID_SIZE / (area[:, 3] - area[:, 2])))
-    return (np.clip(row, 0, GRID_SIZE - 1).astype(np.int64), np.clip(col, 0, GRID_SIZE - 1).astype(np.int64))
-
-
 _OFFSETS = np.arange(GRID_SIZE, dtype=np.float64)
 _BASE_CACHE: dict[int, np.ndarray] = {}
 
@@ -131,8 +124,3 @@ def downsample_coverage(coverage: np.ndarray, out: np.ndarray | None = None) -> 
     np.add(rows[:, :, 0::2], rows[:, :, 1::2], out=blocks)
     blocks *= 0.25
     return out.reshape(n, OBS_GRID * OBS_GRID)
-
-
-def coverage_ratio(coverage: np.ndarray) -> np.ndarray:
-    """(N,) share of covered cells (the paper's coverage metric)."""
-    return coverage.mean(axis=(1, 2))

@@ -59,7 +59,6 @@ def normalise_class_name(name: str) -> str:
     return re.sub(r"[\s_\-]+", " ", str(name)).strip().lower()
 
 
-
 class YoloDataset:
     """A YOLO-format dataset (see the module notes for the layouts and the class-name mapping).
 

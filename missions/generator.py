@@ -184,11 +184,6 @@ def scenario_name(seed: int) -> str:
     return f"gen-seed-{seed}"
 
 
-def generate_split(split: str, count: int, config: GeneratorConfig = GeneratorConfig()) -> list[Scenario]:
-    """The first ``count`` scenarios of a split."""
-    return [generate_scenario(seed, config) for seed in scenario_seeds(split, count)]
-
-
 def generate_scenario(seed: int, config: GeneratorConfig = GeneratorConfig()) -> Scenario:
     """Draw one scenario; the same (seed, config) always gives the same scenario."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

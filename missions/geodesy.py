@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 from missions.validation import FINITE, check_fields
 
@@ -156,23 +155,3 @@ class LocalFrame:
         y = self._y0 + so * horizontal + co * east_m
         z = self._z0 + cl * north_m - sl * down_m
         return ecef_to_geodetic(x, y, z)
-
-
-@lru_cache(maxsize=32)
-def _frame_for(home: GeoPoint) -> LocalFrame:
-    """Share one LocalFrame per home so the function API costs little more than the class API."""
-    return LocalFrame(home)
-
-
-def ned_from_geodetic(
-    home: GeoPoint, lat_deg: float, lon_deg: float, alt_m: float
-) -> tuple[float, float, float]:
-    """Geodetic (deg, deg, m) -> (north, east, down) metres relative to ``home``."""
-    return _frame_for(home).to_ned(lat_deg, lon_deg, alt_m)
-
-
-def geodetic_from_ned(
-    home: GeoPoint, north_m: float, east_m: float, down_m: float
-) -> tuple[float, float, float]:
-    """(north, east, down) metres relative to ``home`` -> geodetic (lat deg, lon deg, alt m)."""
-    return _frame_for(home).to_geodetic(north_m, east_m, down_m)

@@ -20,7 +20,6 @@ def image_seed(seed: int, split: str, index: int) -> int:
     return int(np.random.SeedSequence([seed, zlib.crc32(split.encode()), index]).generate_state(1)[0])
 
 
-
 @dataclass(frozen=True)
 class ImageScenarioConfig:
     """How an annotated image becomes a search scenario (the image is a top-down view of the search area)."""

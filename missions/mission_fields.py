@@ -31,7 +31,6 @@ class InvalidField(Exception):
         self.reason = reason
 
 
-
 def field_path(path: str, key: object) -> str:
     """Field path of ``key`` inside ``path`` (the top level has the empty path); a key with a newline or another
     unprintable character is quoted, so that the message stays one line."""
@@ -166,4 +165,3 @@ def construct(cls: type, path: str, paths: Mapping[str, str] | None = None,
 def area_span(area: SearchArea) -> str:
     return (f"north [{area.north_min_m:g}, {area.north_max_m:g}], "
             f"east [{area.east_min_m:g}, {area.east_max_m:g}]")
-

@@ -99,7 +99,6 @@ class MissionFileError(ValueError):
         super().__init__(": ".join(part for part in (file, field, self.reason) if part))
 
 
-
 def load_mission(path: str | os.PathLike[str]) -> Mission:
     """Read, parse and validate a mission file; raise :class:`MissionFileError` on any problem."""
     path = Path(path)
@@ -147,7 +146,6 @@ def mission_from_dict(data: Mapping[str, Any], base_dir: str | os.PathLike[str],
         raise MissionFileError(source, error.field, error.reason) from None
 
 
-
 class _MissionLoader(yaml.SafeLoader):
     """SafeLoader that refuses duplicate keys: PyYAML silently keeps the last, hiding a typo'd override."""
 
@@ -182,4 +180,3 @@ def _parse_yaml(text: str, source: str) -> Any:
         raise MissionFileError(source, "", f"malformed YAML: {error}") from None
     except ValueError as error:  # an integer beyond Python's 4,300 digits; its advice on Python settings is cut
         raise MissionFileError(source, "", f"malformed YAML: {str(error).split(';')[0]}") from None
-

@@ -219,4 +219,3 @@ def _from_dataset(value: Any, path: str, base_dir: Path) -> Scenario:
         raise InvalidField(f"{path}.image",
                            f"{image!r} yields no scenario (no labelled object can be the primary target)")
     return scenario
-

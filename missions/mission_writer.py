@@ -52,7 +52,6 @@ def save_mission(mission: Mission, path: str | os.PathLike[str]) -> None:
         raise
 
 
-
 class _Flow(dict):
     """A mapping saved in flow style ({a: 1, b: 2}): small records such as a target stay on one line."""
 
@@ -75,7 +74,6 @@ def _styled(value: Any, depth: int) -> Any:
     if isinstance(value, list):
         return [_styled(item, depth + 1) for item in value]
     return value
-
 
 
 def _plain(value: Any) -> Any:

@@ -3,9 +3,9 @@
 Every function is a pure numpy function over arrays with a leading batch dimension N: the vectorised
 training environment calls them with N ~ 1024 scenarios at once, the single environment and the flight
 runtime with N = 1. There are no Python loops over scenarios or grid cells; functions that update state
-(:func:`~missions.coverage.cover`, :func:`drift_targets`) do so in place on arrays the caller owns. Randomness stays with the
-caller: :func:`detection_probability` returns probabilities and :func:`sample_detections` turns them into
-detections with uniforms the caller drew from its own seeded generator.
+(:func:`~missions.coverage.cover`, :func:`drift_targets`) do so in place on arrays the caller owns. Randomness
+stays with the caller: :func:`detection_probability` returns probabilities, which the caller compares with
+uniforms it drew from its own seeded generator.
 
 World model (positions are metres (north, east) in the local NED frame of home):
 
@@ -38,7 +38,6 @@ import numpy as np
 # The coverage grid is missions/coverage.py; the training environment and the flight runtime still reach these
 # names as ``search.X`` (policies/env/, autonomy/observation.py, missions/search_state.py, missions/belief_search.py).
 from missions.coverage import GRID_SIZE, SENSOR_ON_INTENSITY, cover, downsample_coverage  # noqa: F401
-from missions.mission import Mission
 from missions.scenario import CATEGORIES, WIND_FULL_SCALE_MPS, Scenario, SearchArea
 
 NUM_CATEGORIES = len(CATEGORIES)
@@ -225,11 +224,6 @@ class ScenarioBatch:
             endurance_s=np.array([np.inf if s.endurance_s is None else s.endurance_s for s in scenarios]),
         )
 
-    @classmethod
-    def from_missions(cls, missions: Sequence[Mission], **padding: int | None) -> ScenarioBatch:
-        """Stack the scenarios of :class:`missions.mission.Mission` objects with their geofences."""
-        return cls.from_scenarios([m.scenario for m in missions], [m.fence for m in missions], **padding)
-
     def select(self, index: int | slice | Sequence[int] | np.ndarray) -> ScenarioBatch:
         """A sub-batch (copies); an integer index keeps the batch dimension (N = 1)."""
         if isinstance(index, (int, np.integer)):
@@ -321,11 +315,6 @@ def detection_probability_from_factors(drone_ne: np.ndarray, target_ne: np.ndarr
     return p
 
 
-def sample_detections(probability: np.ndarray, uniform: np.ndarray) -> np.ndarray:
-    """(N, T) bool detections from probabilities and the caller's uniforms in [0, 1) (same shape)."""
-    return uniform < probability
-
-
 def detected_categories(detections: np.ndarray, category: np.ndarray) -> np.ndarray:
     """(N, 6) bool: whether an object of each category (CATEGORIES order) was detected."""
     found = np.zeros((detections.shape[0], NUM_CATEGORIES), dtype=bool)
@@ -354,12 +343,6 @@ def distance_to_primary(drone_ne: np.ndarray, target_ne: np.ndarray, primary_ind
     """(N,) horizontal distance (m) from the drone to the primary target."""
     primary = target_ne[np.arange(target_ne.shape[0]), primary_index]
     return np.hypot(primary[:, 0] - drone_ne[:, 0], primary[:, 1] - drone_ne[:, 1])
-
-
-def target_reached(drone_ne: np.ndarray, target_ne: np.ndarray, primary_index: np.ndarray,
-                   reach_radius_m: np.ndarray | float) -> np.ndarray:
-    """(N,) bool: the primary target is within reach_radius_m (horizontally)."""
-    return distance_to_primary(drone_ne, target_ne, primary_index) <= reach_radius_m
 
 
 def inside_obstacle(drone_ne: np.ndarray, obstacles: np.ndarray, obstacle_valid: np.ndarray) -> np.ndarray:

@@ -28,7 +28,6 @@ class DatasetError(ValueError):
     """A dataset cannot be read: a missing folder, a malformed data.yaml or (in strict mode) a bad label line."""
 
 
-
 @dataclass(frozen=True)
 class Box:
     """One labelled box, normalised to the image: centre (cx, cy) and size (w, h) in [0, 1]."""

@@ -293,7 +293,6 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
             north, east, down = self._clamp_velocity(north, east, down)
         self.setpoint = Setpoint(now, not use_pos, north, east, down, yaw_rad, yaw_rate_rad_s)
         self.taking_off, self.guided_timed_out = False, False  # a new target ends a takeoff
-        self.setpoints_accepted += 1
         return True
 
     def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:

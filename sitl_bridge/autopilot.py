@@ -246,7 +246,6 @@ class Autopilot(AutopilotBase):
         self.setpoint = Setpoint(now, is_velocity, north, east, down,
                                  yaw if use_yaw else None,
                                  self._clamp_yaw_rate(yaw_rate) if use_rate else None)
-        self.setpoints_accepted += 1
         return True
 
     @staticmethod

@@ -175,11 +175,6 @@ class SensorSuite:
         north, east, down = self._gps_bias
         return (north, east, down)
 
-    @property
-    def baro_bias_m(self) -> float:
-        """Current barometric bias in metres (simulator truth, for tests and diagnostics)."""
-        return self._baro_bias_m
-
     def update(
         self,
         time_s: float,

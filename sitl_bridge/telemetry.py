@@ -17,10 +17,7 @@ from missions.geodesy import GeoPoint, LocalFrame
 from sitl_bridge.autopilot_base import CELL_COUNT, CELL_NOMINAL_V, AutopilotBase, battery_voltage_v
 from sitl_bridge.multirotor import VehicleState
 from sitl_bridge.sensors import SensorSuite
-from sitl_bridge.telemetry_profiles import LEGACY_RATES_HZ
 from sitl_bridge.vehicle_config import VehicleConfig
-
-DEFAULT_RATES_HZ = LEGACY_RATES_HZ  # the name older code imports
 
 SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE

@@ -225,4 +225,3 @@ def _command_name(command: int) -> str:
 
 def _result_name(result: int) -> str:
     return mavlink.enums["MAV_RESULT"][result].name.removeprefix("MAV_RESULT_")
-

@@ -26,7 +26,7 @@ class Wind:
     Gusts are, per axis, a sum of :data:`GUSTS_PER_AXIS` sinusoids whose periods (3-30 s), phases and
     relative weights are drawn once from ``random.Random(seed)``. The horizontal RMS gust speed is
     ``gust_mps``; vertical gusts are :data:`VERTICAL_GUST_FRACTION` of that. Being a function of absolute
-    time is what lets :meth:`gust_displacement` integrate them exactly for any step.
+    time is what lets :func:`gust_drift` integrate them exactly for any step.
     """
 
     north_mps: float = 0.0
@@ -57,10 +57,6 @@ class Wind:
         """Gust part of the air velocity (NED, m/s) at absolute simulated time ``time_s``."""
         return tuple(sum(a * math.sin(w * time_s + ph) for a, w, ph, _ in axis)  # type: ignore[return-value]
                      for axis in self._terms)
-
-    def gust_displacement(self, t0_s: float, t1_s: float) -> tuple[float, float, float]:
-        """Exact integral of :meth:`gust_velocity` from ``t0_s`` to ``t1_s`` (NED, m)."""
-        return tuple(axis_displacement(axis, t0_s, t1_s) for axis in self._terms)  # type: ignore[return-value]
 
 
 def axis_displacement(terms: tuple, t0_s, t1_s, xp=ScalarMath):
