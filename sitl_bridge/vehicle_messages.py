@@ -90,7 +90,8 @@ class MessageHandlers:
                   and endpoint.set_message_interval(msg_id, p[1], now, self.dt_s))
             result = ACCEPTED if ok else DENIED
         elif command in REQUESTABLE:
-            msg_id = as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            msg_id = (as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE
+                      else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             builder = telemetry.BUILDERS.get(msg_id)
             follow_up = builder(self) if builder else None
             result = ACCEPTED if follow_up is not None else DENIED
