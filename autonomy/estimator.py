@@ -35,6 +35,7 @@ from filterpy.common import Q_continuous_white_noise
 from filterpy.kalman import KalmanFilter
 
 from missions.geodesy import GeoPoint, LocalFrame
+from missions.validation import COUNT, NON_NEGATIVE, POSITIVE, check_in
 
 LOCAL_POSITION_NED = "LOCAL_POSITION_NED"
 GLOBAL_POSITION_INT = "GLOBAL_POSITION_INT"
@@ -86,28 +87,18 @@ class EstimatorConfig:
     max_message_age_s: float = 2.0
 
     def __post_init__(self) -> None:
-        for field in fields(self):
-            value = getattr(self, field.name)
-            allowed, valid = _field_rule(field.name)
-            if not valid(value):
-                raise ValueError(f"EstimatorConfig.{field.name} must be {allowed}, got {value!r}; "
-                                 f"try the default {field.default!r}")
+        if not (isinstance(self.model, str) and self.model in MODELS):
+            raise ValueError(f"EstimatorConfig.model must be one of {sorted(MODELS)}, got {self.model!r}; "
+                             f"try the default 'constant_velocity'")
+        # The defaults are sound for any autopilot's telemetry, so an error suggests the default to go back to.
+        allowed = {"max_consecutive_rejections": COUNT, "converged_min_updates": COUNT,
+                   "late_tolerance_s": NON_NEGATIVE}
+        for field in (f for f in fields(self) if f.name != "model"):
+            check_in("EstimatorConfig", field.name, getattr(self, field.name), allowed.get(field.name, POSITIVE),
+                     hint=f"; try the default {field.default!r}")
         if self.late_tolerance_s >= self.reboot_backstep_s:
             raise ValueError(f"EstimatorConfig.late_tolerance_s must be below reboot_backstep_s "
                              f"({self.reboot_backstep_s!r}), got {self.late_tolerance_s!r}; try the default 0.02")
-
-
-def _field_rule(name: str):
-    """(wording of the allowed range, check) for one EstimatorConfig field."""
-    if name == "model":
-        return f"one of {sorted(MODELS)}", lambda v: isinstance(v, str) and v in MODELS
-    # bool is an int subclass but never a meaningful noise level or count.
-    number = (lambda v, types=(int, float): isinstance(v, types) and not isinstance(v, bool) and math.isfinite(v))
-    if name in ("max_consecutive_rejections", "converged_min_updates"):
-        return "an integer >= 1", lambda v: number(v, int) and v >= 1
-    if name == "late_tolerance_s":
-        return "a finite number >= 0", lambda v: number(v) and v >= 0.0
-    return "a finite number > 0", lambda v: number(v) and v > 0.0
 
 
 @dataclass(frozen=True)

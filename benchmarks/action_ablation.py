@@ -39,8 +39,8 @@ import torch
 from common import results_file, write_report
 
 from autonomy.observation import LAYOUT_V3
+from missions.coverage import SENSOR_ON_INTENSITY
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
-from missions.search import SENSOR_ON_INTENSITY
 from policies.checkpoint import CheckpointPolicy
 from policies.env.baselines import fly_straight
 from policies.env.baselines_v0 import ZOOM as SCRIPTED_ZOOM

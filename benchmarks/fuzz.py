@@ -43,7 +43,8 @@ from autonomy.vehicle_time import (
     receive_telemetry,  # noqa: E402
 )
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair  # noqa: E402
-from sitl_bridge.vehicle import DEFAULT_HOME, SimulatedVehicle, VehicleConfig  # noqa: E402
+from sitl_bridge.vehicle import SimulatedVehicle  # noqa: E402
+from sitl_bridge.vehicle_config import DEFAULT_HOME, VehicleConfig  # noqa: E402
 
 TARGET_KEY = bytes(range(1, 33))  # what the signed targets use
 ATTACKER_KEY = bytes(range(101, 133))  # what the corpus's signed frames use: the fuzzer never has the real key

@@ -2,7 +2,7 @@
 
 A crew plans a search from a probability map (IAMSAR's probability of containment) and lowers it after every
 look by the look's probability of detection (Koopman's search theory). Here, on the 32 x 32 grid over the area
-(``missions.search.GRID_SIZE``), for N searches at once:
+(``missions.coverage.GRID_SIZE``), for N searches at once:
 
 * **prior**: a Gaussian around the datum with the datum's sigma at the cell centres, normalised over the area
   (the crew assumes the victim is in the area it searches);
@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from missions import search
+from missions import coverage, search
 
 FORECAST_SIGMA_MPS = 0.05
 """The crew's assumed 1-sigma error of the forecast current per axis (m/s); the generator's SarSearch-v1 draws
@@ -39,12 +39,12 @@ MAX_PASS_VARIANCE = 0.5
 
 def cell_size_m(area: np.ndarray) -> np.ndarray:
     """(N, 2) the north and east size of a grid cell (m)."""
-    return (area[:, 1::2] - area[:, 0::2]) / search.GRID_SIZE
+    return (area[:, 1::2] - area[:, 0::2]) / coverage.GRID_SIZE
 
 
 def prior(area: np.ndarray, datum: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """(N, G, G) the Gaussian around ``datum`` (N, 2) with ``sigma`` (N,) at the cell centres, summing to 1."""
-    fractions = (np.arange(search.GRID_SIZE) + 0.5) / search.GRID_SIZE
+    fractions = (np.arange(coverage.GRID_SIZE) + 0.5) / coverage.GRID_SIZE
     north = area[:, 0:1] + fractions * (area[:, 1:2] - area[:, 0:1])
     east = area[:, 2:3] + fractions * (area[:, 3:4] - area[:, 2:3])
     two_sigma2 = 2.0 * np.maximum(sigma, 1.0)[:, None] ** 2
@@ -103,7 +103,7 @@ def look(belief: np.ndarray, searched: np.ndarray, area: np.ndarray, offset: np.
     an object of size ``size_m`` (N,) with condition factor ``factor`` (N,) (``search.condition_factor`` of the
     reported category). Returns the belief removed per search (N,), the probability this look detects the victim
     under the crew's model."""
-    n, grid = belief.shape[0], search.GRID_SIZE
+    n, grid = belief.shape[0], coverage.GRID_SIZE
     size = cell_size_m(area)
     half_width = search.footprint_half_width_m(altitude_m, zoom)
     reach = int(np.max(half_width[:, None] / size) + 0.5) + 1  # cells from the drone's to a footprint cell's

@@ -9,8 +9,9 @@ import argparse
 import sys
 import time
 
-from missions.datasets import DatasetError, DatasetSummary, YoloDataset
+from missions.datasets import YoloDataset
 from missions.scenario import CATEGORIES
+from missions.yolo_labels import DatasetError, DatasetSummary
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:

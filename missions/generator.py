@@ -41,6 +41,7 @@ import numpy as np
 
 from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay,
                                Weather)
+from missions.validation import Interval, check_fields
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 SPLIT_SEED_STRIDE = 1_000_000_000
@@ -112,31 +113,20 @@ class GeneratorConfig:
 
     def __post_init__(self) -> None:
         half = self.area_size_m / 2.0 if isinstance(self.area_size_m, (int, float)) else math.nan
-        checks = (
-            ("area_size_m", 200.0, 20000.0, True), ("home_inset_m", 0.0, half, True),
-            ("datum_margin_m", 0.0, half, False), ("min_datum_distance_m", 0.0, 1e5, True),
-            ("datum_sigma_min_m", 1.0, 1000.0, True), ("datum_sigma_max_m", self.datum_sigma_min_m, 1000.0, True),
-            ("target_margin_m", 0.0, half, False), ("max_distractors", 0, 50, True),
-            ("max_obstacles", 0, 20, True), ("obstacle_radius_min_m", 1.0, 500.0, True),
-            ("obstacle_radius_max_m", self.obstacle_radius_min_m, 500.0, True),
-            ("obstacle_clearance_m", 0.0, 1000.0, True), ("visibility_min", 0.3, 1.0, True),
-            ("visibility_max", self.visibility_min, 1.0, True), ("fog_visibility_max", self.visibility_min, 1.0, True),
-            ("wind_beta_a", 0.0, 100.0, True), ("wind_beta_b", 0.0, 100.0, True),
-            ("max_current_mps", 0.0, 3.0, True), ("decoys_max", 0, 20, True), ("decoys_min", 0, self.decoys_max, True),
-            ("decoy_spread_sigmas", 0.1, 20.0, True), ("endurance_max_s", 0.0, 1e5, True),
-            ("endurance_min_s", 0.0, self.endurance_max_s, True), ("forecast_error_mps", 0.0, 1.0, True),
-        )
-        for name, low, high, high_included in checks:
-            value = getattr(self, name)
-            ok = (not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-                  and low <= value and (value <= high if high_included else value < high))
-            if name.startswith("wind_beta") and ok:
-                ok = value > 0.0  # Beta parameters are strictly positive
-            if ok and (name.startswith("max_") and name != "max_current_mps" or name.startswith("decoys_")):
-                ok = int(value) == value
-            if not ok:
-                bracket = "]" if high_included else ")"
-                raise ValueError(f"GeneratorConfig.{name} must be in [{low:g}, {high:g}{bracket}, got {value!r}")
+        inner = Interval(0.0, half, high_open=True)  # a margin of half the area would leave no inner part
+        beta = Interval(0.0, 100.0, low_open=True)  # Beta distribution parameters are strictly positive
+        check_fields(self, (
+            ("area_size_m", 200.0, 20000.0), ("home_inset_m", 0.0, half), ("datum_margin_m", inner),
+            ("min_datum_distance_m", 0.0, 1e5), ("datum_sigma_min_m", 1.0, 1000.0),
+            ("datum_sigma_max_m", self.datum_sigma_min_m, 1000.0), ("target_margin_m", inner),
+            ("max_distractors", 0, 50), ("max_obstacles", 0, 20), ("obstacle_radius_min_m", 1.0, 500.0),
+            ("obstacle_radius_max_m", self.obstacle_radius_min_m, 500.0), ("obstacle_clearance_m", 0.0, 1000.0),
+            ("visibility_min", 0.3, 1.0), ("visibility_max", self.visibility_min, 1.0),
+            ("fog_visibility_max", self.visibility_min, 1.0), ("wind_beta_a", beta), ("wind_beta_b", beta),
+            ("max_current_mps", 0.0, 3.0), ("decoys_max", 0, 20), ("decoys_min", 0, self.decoys_max),
+            ("decoy_spread_sigmas", 0.1, 20.0), ("endurance_max_s", 0.0, 1e5),
+            ("endurance_min_s", 0.0, self.endurance_max_s), ("forecast_error_mps", 0.0, 1.0),
+        ), integers=("max_distractors", "max_obstacles", "decoys_max", "decoys_min"))
         if 0.0 < self.endurance_max_s < 60.0:
             raise ValueError(f"GeneratorConfig.endurance_max_s must be 0 (unlimited) or in [60, 100000], "
                              f"got {self.endurance_max_s!r}")
@@ -192,11 +182,6 @@ def scenario_name(seed: int) -> str:
     if split < len(SPLITS):
         return f"gen-{SPLITS[split]}-{index:06d}"
     return f"gen-seed-{seed}"
-
-
-def generate_split(split: str, count: int, config: GeneratorConfig = GeneratorConfig()) -> list[Scenario]:
-    """The first ``count`` scenarios of a split."""
-    return [generate_scenario(seed, config) for seed in scenario_seeds(split, count)]
 
 
 def generate_scenario(seed: int, config: GeneratorConfig = GeneratorConfig()) -> Scenario:

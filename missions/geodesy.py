@@ -26,9 +26,9 @@ home's position and rotation basis so that each conversion is a handful of scala
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
-from functools import lru_cache
+
+from missions.validation import FINITE, check_fields
 
 WGS84_A_M = 6378137.0
 """Semi-major axis (equatorial radius) of the WGS-84 ellipsoid, metres."""
@@ -65,19 +65,7 @@ class GeoPoint:
     alt_m: float = 0.0
 
     def __post_init__(self) -> None:
-        _check_real("lat_deg", self.lat_deg, -90.0, 90.0, "deg")
-        _check_real("lon_deg", self.lon_deg, -180.0, 180.0, "deg")
-        _check_real("alt_m", self.alt_m, -math.inf, math.inf, "m")
-
-
-def _check_real(name: str, value: object, low: float, high: float, unit: str) -> None:
-    """Raise if ``value`` is not a finite real number within [low, high]."""
-    allowed = f"a finite number in [{low:g}, {high:g}] {unit}"
-    # bool is an int subclass; GeoPoint(True, ...) is surely a bug, not latitude 1.
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"GeoPoint.{name} must be {allowed}, got {value!r}")
-    if not (math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"GeoPoint.{name} must be {allowed}, got {value!r}")
+        check_fields(self, (("lat_deg", -90.0, 90.0), ("lon_deg", -180.0, 180.0), ("alt_m", FINITE)))
 
 
 def geodetic_to_ecef(lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
@@ -167,23 +155,3 @@ class LocalFrame:
         y = self._y0 + so * horizontal + co * east_m
         z = self._z0 + cl * north_m - sl * down_m
         return ecef_to_geodetic(x, y, z)
-
-
-@lru_cache(maxsize=32)
-def _frame_for(home: GeoPoint) -> LocalFrame:
-    """Share one LocalFrame per home so the function API costs little more than the class API."""
-    return LocalFrame(home)
-
-
-def ned_from_geodetic(
-    home: GeoPoint, lat_deg: float, lon_deg: float, alt_m: float
-) -> tuple[float, float, float]:
-    """Geodetic (deg, deg, m) -> (north, east, down) metres relative to ``home``."""
-    return _frame_for(home).to_ned(lat_deg, lon_deg, alt_m)
-
-
-def geodetic_from_ned(
-    home: GeoPoint, north_m: float, east_m: float, down_m: float
-) -> tuple[float, float, float]:
-    """(north, east, down) metres relative to ``home`` -> geodetic (lat deg, lon deg, alt m)."""
-    return _frame_for(home).to_geodetic(north_m, east_m, down_m)

@@ -119,14 +119,6 @@ class SearchArea:
     def contains(self, north_m: float, east_m: float) -> bool:
         return self.north_min_m <= north_m <= self.north_max_m and self.east_min_m <= east_m <= self.east_max_m
 
-    def normalise(self, north_m, east_m):
-        """(north, east) in metres -> (x, y) in [0, 1] over the area (works on numpy arrays too)."""
-        return (north_m - self.north_min_m) / self.size_north_m, (east_m - self.east_min_m) / self.size_east_m
-
-    def denormalise(self, x, y):
-        """Inverse of :meth:`normalise`."""
-        return self.north_min_m + x * self.size_north_m, self.east_min_m + y * self.size_east_m
-
 
 @dataclass(frozen=True)
 class Scenario:

@@ -3,22 +3,17 @@
 Every function is a pure numpy function over arrays with a leading batch dimension N: the vectorised
 training environment calls them with N ~ 1024 scenarios at once, the single environment and the flight
 runtime with N = 1. There are no Python loops over scenarios or grid cells; functions that update state
-(:func:`cover`, :func:`drift_targets`) do so in place on arrays the caller owns. Randomness stays with the
-caller: :func:`detection_probability` returns probabilities and :func:`sample_detections` turns them into
-detections with uniforms the caller drew from its own seeded generator.
+(:func:`~missions.coverage.cover`, :func:`drift_targets`) do so in place on arrays the caller owns. Randomness
+stays with the caller: :func:`detection_probability` returns probabilities, which the caller compares with
+uniforms it drew from its own seeded generator.
 
 World model (positions are metres (north, east) in the local NED frame of home):
 
 * **Search area and coverage grid.** The area is the rectangle ``north_min..north_max x east_min..east_max``
-  (``area`` arrays are (N, 4) in that order). It is divided into ``GRID_SIZE x GRID_SIZE`` cells; row ``i``
-  counts north from ``north_min``, column ``j`` east from ``east_min``. The observation sees the grid
-  averaged over 2 x 2 blocks (``OBS_GRID x OBS_GRID`` = 256 values, row-major, north rows first).
+  (``area`` arrays are (N, 4) in that order), divided into the coverage grid of ``missions/coverage.py``.
 * **Camera.** A nadir camera with a ``CAMERA_FOV_DEG`` horizontal field of view at zoom 0 and an optical
   zoom factor ``1 + ZOOM_RANGE * zoom`` (zoom in [0, 1] -> 1x..4x). Its footprint is a north/east-aligned
   square with half-width ``h = altitude * tan(FOV / 2) / zoom_factor`` (35.01 m at 50 m and zoom 0).
-* **Coverage.** While the sensor is on (search intensity >= ``SENSOR_ON_INTENSITY``) every cell whose centre
-  lies inside the footprint becomes covered (1.0), and so does the cell containing the drone (so that a
-  footprint smaller than a cell still counts). Coverage never decreases.
 * **Detection.** A target can only be detected inside the footprint. Per step it is detected with
   probability ``p = intensity * DETECTION_CEILING * f_range * f_res * f_vis * f_weather * f_time * f_sea``:
   ``f_range = 1 - 0.5 (r / h)^2`` (r = horizontal distance; image edges are worse than the centre),
@@ -40,13 +35,11 @@ from typing import Sequence
 
 import numpy as np
 
-from missions.mission import Mission
+# The coverage grid is missions/coverage.py; the training environment and the flight runtime still reach these
+# names as ``search.X`` (policies/env/, autonomy/observation.py, missions/search_state.py, missions/belief_search.py).
+from missions.coverage import GRID_SIZE, SENSOR_ON_INTENSITY, cover, downsample_coverage  # noqa: F401
 from missions.scenario import CATEGORIES, WIND_FULL_SCALE_MPS, Scenario, SearchArea
 
-GRID_SIZE = 32
-"""Cells per side of the coverage grid over the search area (32 x 32 = 1,024 cells)."""
-OBS_GRID = GRID_SIZE // 2
-"""Cells per side of the observed coverage grid (2 x 2 block means): 16 x 16 = 256 values."""
 NUM_CATEGORIES = len(CATEGORIES)
 
 CAMERA_FOV_DEG = 70.0
@@ -54,8 +47,6 @@ CAMERA_FOV_DEG = 70.0
 TAN_HALF_FOV = math.tan(math.radians(CAMERA_FOV_DEG / 2.0))
 ZOOM_RANGE = 3.0
 """Optical zoom factor is 1 + ZOOM_RANGE * zoom: zoom 0 -> 1x, zoom 1 -> 4x."""
-SENSOR_ON_INTENSITY = 0.5
-"""Search intensity at or above which the sensor counts as on for coverage."""
 
 DETECTION_CEILING = 0.98
 """Best per-step detection probability (even a perfect view misses now and then)."""
@@ -233,11 +224,6 @@ class ScenarioBatch:
             endurance_s=np.array([np.inf if s.endurance_s is None else s.endurance_s for s in scenarios]),
         )
 
-    @classmethod
-    def from_missions(cls, missions: Sequence[Mission], **padding: int | None) -> ScenarioBatch:
-        """Stack the scenarios of :class:`missions.mission.Mission` objects with their geofences."""
-        return cls.from_scenarios([m.scenario for m in missions], [m.fence for m in missions], **padding)
-
     def select(self, index: int | slice | Sequence[int] | np.ndarray) -> ScenarioBatch:
         """A sub-batch (copies); an integer index keeps the batch dimension (N = 1)."""
         if isinstance(index, (int, np.integer)):
@@ -329,132 +315,11 @@ def detection_probability_from_factors(drone_ne: np.ndarray, target_ne: np.ndarr
     return p
 
 
-def sample_detections(probability: np.ndarray, uniform: np.ndarray) -> np.ndarray:
-    """(N, T) bool detections from probabilities and the caller's uniforms in [0, 1) (same shape)."""
-    return uniform < probability
-
-
 def detected_categories(detections: np.ndarray, category: np.ndarray) -> np.ndarray:
     """(N, 6) bool: whether an object of each category (CATEGORIES order) was detected."""
     found = np.zeros((detections.shape[0], NUM_CATEGORIES), dtype=bool)
     found[detections.nonzero()[0], category[detections]] = True
     return found
-
-
-# --------------------------------------------------------------------------------------------- coverage
-
-
-def grid_cell(area: np.ndarray, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(row, col) int64 arrays of the cells containing (north, east), clipped to [0, GRID_SIZE - 1]."""
-    row = np.floor((north - area[:, 0]) * (GRID_SIZE / (area[:, 1] - area[:, 0])))
-    col = np.floor((east - area[:, 2]) * (GRID_SIZE / (area[:, 3] - area[:, 2])))
-    return (np.clip(row, 0, GRID_SIZE - 1).astype(np.int64), np.clip(col, 0, GRID_SIZE - 1).astype(np.int64))
-
-
-_OFFSETS = np.arange(GRID_SIZE, dtype=np.float64)
-_BASE_CACHE: dict[int, np.ndarray] = {}
-
-
-def _flat_base(n: int) -> np.ndarray:
-    """(N,) offsets of each scenario's grid in the flattened coverage (cached: the same N every step)."""
-    base = _BASE_CACHE.get(n)
-    if base is None:
-        base = _BASE_CACHE[n] = np.arange(n, dtype=np.float64) * (GRID_SIZE * GRID_SIZE)
-    return base
-
-
-def cover(coverage: np.ndarray, area: np.ndarray, drone_ne: np.ndarray, half_width: np.ndarray | float,
-          intensity: np.ndarray | float) -> np.ndarray:
-    """Mark the cells seen this step as covered, in place; returns newly covered cells per scenario (N,).
-
-    coverage: (N, GRID_SIZE, GRID_SIZE) float32, C-contiguous, owned by the caller; area (N, 4);
-    drone_ne (N, 2); half_width (N,) or scalar, from :func:`footprint_half_width_m`; intensity (N,) or scalar.
-    """
-    if not coverage.flags.c_contiguous:
-        raise ValueError("cover: coverage must be C-contiguous (it is updated through a flat view)")
-    n = coverage.shape[0]
-    if n == 1:  # the single environment and the flight runtime: plain slices beat numpy's per-call overhead
-        return _cover_one(coverage[0], area[0], drone_ne[0], float(np.reshape(half_width, -1)[0]),
-                          float(np.reshape(intensity, -1)[0]))
-    # Both axes at once, as (2, N) arrays (north row, east row) so that numpy's inner loops run over N:
-    # area[:, 0::2] is (north_min, east_min) per scenario, area[:, 1::2] the maxima.
-    low = area[:, 0::2]
-    cells_per_m = GRID_SIZE / (area[:, 1::2] - low)
-    u = ((drone_ne - low) * cells_per_m).T  # drone position in cell units; the centre of cell k sits at k + 0.5
-    reach = np.reshape(half_width, (1, -1)) * cells_per_m.T  # footprint half-width in cell units
-    # The drone's own cell; a drone exactly on the far edge of the area is in the last cell, and a drone
-    # outside the area gets an index outside the grid, which no window below contains.
-    own = np.floor(u)
-    own -= u == GRID_SIZE
-
-    # Update a K x K window per scenario instead of the whole grid: the footprint spans a few cells, so this
-    # touches N * K * K values rather than N * 1024. A cell whose centre is within reach is at most
-    # floor(reach + 0.5) cells from the own cell, so the window own +- m holds them all; it is shifted to lie
-    # inside the grid, which keeps its cells distinct (the gather / scatter below never writes a cell twice).
-    m = int(reach.max() + 0.5)
-    k = min(2 * m + 1, GRID_SIZE)
-    index = np.minimum(np.maximum(own - m, 0.0), GRID_SIZE - k)[:, None, :] + _OFFSETS[:k, None]  # (2, K, N)
-    centre_in = np.abs(index - (u - 0.5)[:, None, :]) <= reach[:, None, :]
-    own_cell = index == own[:, None, :]
-    seen = centre_in[0, :, None] & centre_in[1, None]  # (K, K, N): the cell centre is inside the footprint
-    seen |= own_cell[0, :, None] & own_cell[1, None]  # or the drone is over the cell
-    seen &= np.reshape(intensity, -1) >= SENSOR_ON_INTENSITY
-
-    flat_index = ((index[0] * GRID_SIZE + _flat_base(n))[:, None] + index[1, None]).astype(np.int64)
-    flat = coverage.reshape(-1)
-    before = flat[flat_index]
-    after = np.maximum(before, seen)
-    flat[flat_index] = after
-    after -= before
-    return after.sum(axis=(0, 1), dtype=np.int64)
-
-
-def _cover_one(grid: np.ndarray, area: np.ndarray, drone_ne: np.ndarray, half_width: float,
-               intensity: float) -> np.ndarray:
-    """:func:`cover` for one scenario, with the same rule: the cells whose centres lie in the footprint form
-    a rectangle of rows and columns, plus the drone's own cell."""
-    if intensity < SENSOR_ON_INTENSITY:
-        return np.zeros(1, dtype=np.int64)
-    ranges = []
-    for axis in (0, 1):
-        low, high = float(area[2 * axis]), float(area[2 * axis + 1])
-        cells_per_m = GRID_SIZE / (high - low)
-        u = (float(drone_ne[axis]) - low) * cells_per_m
-        reach = half_width * cells_per_m
-        own = math.floor(u) - (u == GRID_SIZE)
-        first = max(math.ceil(u - 0.5 - reach), 0)  # |k + 0.5 - u| <= reach
-        last = min(math.floor(u - 0.5 + reach), GRID_SIZE - 1)
-        ranges.append((first, last, own))
-    (r0, r1, own_row), (c0, c1, own_col) = ranges
-    newly = 0
-    if r0 <= r1 and c0 <= c1:
-        block = grid[r0:r1 + 1, c0:c1 + 1]
-        newly = block.size - int(np.count_nonzero(block))
-        block[...] = 1.0
-    if 0 <= own_row < GRID_SIZE and 0 <= own_col < GRID_SIZE and grid[own_row, own_col] == 0.0:
-        grid[own_row, own_col] = 1.0
-        newly += 1
-    return np.array([newly], dtype=np.int64)
-
-
-def downsample_coverage(coverage: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """(N, OBS_GRID * OBS_GRID) float32: means of 2 x 2 blocks, row-major with north rows first.
-
-    ``out`` may be a preallocated (N, OBS_GRID, OBS_GRID) or (N, 256) float32 array to fill.
-    """
-    n = coverage.shape[0]
-    rows = coverage[:, 0::2, :] + coverage[:, 1::2, :]  # (N, 16, 32): pairs of rows (contiguous runs)
-    if out is None:
-        out = np.empty((n, OBS_GRID * OBS_GRID), dtype=np.float32)
-    blocks = out.reshape(n, OBS_GRID, OBS_GRID)
-    np.add(rows[:, :, 0::2], rows[:, :, 1::2], out=blocks)
-    blocks *= 0.25
-    return out.reshape(n, OBS_GRID * OBS_GRID)
-
-
-def coverage_ratio(coverage: np.ndarray) -> np.ndarray:
-    """(N,) share of covered cells (the paper's coverage metric)."""
-    return coverage.mean(axis=(1, 2))
 
 
 # -------------------------------------------------------------------------------------- drift and events
@@ -478,12 +343,6 @@ def distance_to_primary(drone_ne: np.ndarray, target_ne: np.ndarray, primary_ind
     """(N,) horizontal distance (m) from the drone to the primary target."""
     primary = target_ne[np.arange(target_ne.shape[0]), primary_index]
     return np.hypot(primary[:, 0] - drone_ne[:, 0], primary[:, 1] - drone_ne[:, 1])
-
-
-def target_reached(drone_ne: np.ndarray, target_ne: np.ndarray, primary_index: np.ndarray,
-                   reach_radius_m: np.ndarray | float) -> np.ndarray:
-    """(N,) bool: the primary target is within reach_radius_m (horizontally)."""
-    return distance_to_primary(drone_ne, target_ne, primary_index) <= reach_radius_m
 
 
 def inside_obstacle(drone_ne: np.ndarray, obstacles: np.ndarray, obstacle_valid: np.ndarray) -> np.ndarray:

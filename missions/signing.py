@@ -249,7 +249,8 @@ class LinkSigning:
 
     def summary(self) -> dict:
         """Counts for reports: signed frames accepted, unsigned accepted by type, rejected by reason."""
-        return {"accepted_signed": self.accepted_signed, "accepted_unsigned": dict(sorted(self.accepted_unsigned.items())),
+        return {"accepted_signed": self.accepted_signed,
+                "accepted_unsigned": dict(sorted(self.accepted_unsigned.items())),
                 "rejected": dict(sorted(self.rejected.items())), "rejected_total": sum(self.rejected.values())}
 
     def describe_rejections(self) -> str:

@@ -27,8 +27,8 @@ import cv2
 import numpy as np
 import yaml
 
-from missions.datasets import DatasetSummary, SPLITS
 from missions.scenario import CATEGORIES
+from missions.yolo_labels import SPLITS, DatasetSummary
 
 IMAGE_WIDTH, IMAGE_HEIGHT = 640, 480
 PRIMARY_CHOICES = ("person", "swimmer", "life_jacket")

@@ -9,13 +9,13 @@ core, Dropout alone costs about a third of it; 2 x 256 networks run at 50-90 per
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
 from missions.mission import FlightSettings
+from missions.validation import Interval, check_fields
 
 
 @dataclass(frozen=True)
@@ -34,8 +34,7 @@ class NetworkConfig:
     def __post_init__(self) -> None:
         if not self.hidden or any(int(w) != w or w < 1 for w in self.hidden):
             raise ValueError(f"NetworkConfig.hidden must be positive integers, got {self.hidden}")
-        if not 0.0 <= self.dropout < 1.0:
-            raise ValueError(f"NetworkConfig.dropout must be in [0, 1), got {self.dropout}")
+        check_fields(self, (("dropout", Interval(0.0, 1.0, high_open=True)),))
 
     @property
     def layers(self) -> tuple[int, ...]:
@@ -268,28 +267,22 @@ class TrainConfig:
         if unknown or isinstance(self.low_level_ignores, str):
             raise ValueError(f"TrainConfig.low_level_ignores must be a list of {self.task} observation field names "
                              f"({', '.join(names)}), got {self.low_level_ignores!r}")
-        for name, low, high in (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
-                                ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8),
-                                ("meta_buffer_size", 1, 10**8), ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1),
-                                ("meta_updates_per_transition", 1, 64), ("meta_only_steps", 0, 10**10), ("n_step", 1, 64),
-                                ("eval_every", 0, 10**10), ("eval_episodes", 1, 100_000)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-                raise ValueError(f"TrainConfig.{name} must be an integer in [{low}, {high}], got {value!r}")
-        for name, low, high in (("learning_rate", 1e-7, 1.0), ("gamma", 0.0, 1.0), ("low_level_gamma", 0.0, 1.0),
-                                ("meta_gamma", 0.0, 1.0),
-                                ("tau", 0.0, 1.0), ("updates_per_step", 0.0, 64.0), ("per_alpha", 0.0, 1.0),
-                                ("per_beta_start", 0.0, 1.0), ("meta_target_entropy_scale", 0.0, 1.0),
-                                ("meta_only_entropy_scale", 0.0, 1.0), ("initial_alpha", 1e-6, 100.0),
-                                ("intrinsic_scale_m", 1e-3, 1e6), ("cross_track_penalty", 0.0, 1e3),
-                                ("coverage_bonus", 0.0, 1e3), ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4),
-                                ("identify_bonus", 0.0, 1e4), ("meta_returned_reward", -1e3, 1e3),
-                                ("action_margin", 0.0, 1.0)):
-            value = getattr(self, name)
-            if name == "meta_returned_reward" and value is None:  # the environment's
-                continue
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and low <= value <= high):
-                raise ValueError(f"TrainConfig.{name} must be in [{low:g}, {high:g}], got {value!r}")
+        counts = (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
+                  ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8), ("meta_buffer_size", 1, 10**8),
+                  ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1), ("meta_updates_per_transition", 1, 64),
+                  ("meta_only_steps", 0, 10**10), ("n_step", 1, 64), ("eval_every", 0, 10**10),
+                  ("eval_episodes", 1, 100_000))
+        check_fields(self, counts, integers=[name for name, _, _ in counts])
+        check_fields(self, (("learning_rate", 1e-7, 1.0), ("gamma", 0.0, 1.0), ("low_level_gamma", 0.0, 1.0),
+                            ("meta_gamma", 0.0, 1.0), ("tau", 0.0, 1.0), ("updates_per_step", 0.0, 64.0),
+                            ("per_alpha", 0.0, 1.0), ("per_beta_start", 0.0, 1.0),
+                            ("meta_target_entropy_scale", 0.0, 1.0), ("meta_only_entropy_scale", 0.0, 1.0),
+                            ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6),
+                            ("cross_track_penalty", 0.0, 1e3), ("coverage_bonus", 0.0, 1e3),
+                            ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4), ("identify_bonus", 0.0, 1e4),
+                            ("action_margin", 0.0, 1.0)))
+        if self.meta_returned_reward is not None:  # None: the environment's
+            check_fields(self, (("meta_returned_reward", -1e3, 1e3),))
         if self.meta_returned_reward is not None and self.task != "SarSearch-v1":
             raise ValueError(f"TrainConfig.meta_returned_reward applies to SarSearch-v1 only (its return home), got "
                              f"{self.meta_returned_reward!r} on {self.task}; leave it unset (None)")
@@ -298,7 +291,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "
                              f"{self.action_frame!r} on {self.task}")
         if self.meta_joint_goals not in ("learned", "random"):
-            raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', got {self.meta_joint_goals!r}")
+            raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', "
+                             f"got {self.meta_joint_goals!r}")
         if self.meta_joint_goals == "random" and self.meta_only_steps <= 0 and self.algo == "hrl-sac":
             raise ValueError("TrainConfig.meta_joint_goals 'random' needs a meta-only phase for the meta-controller to "
                              "learn in: set meta_only_steps above 0")

@@ -13,7 +13,8 @@ ArduPilot's source, read through the search tools (docs/sitl.md, "ArduPilot Copt
 * GUIDED: velocity and position targets (SET_POSITION_TARGET_LOCAL_NED); GUID_TIMEOUT (3 s) after the last
   velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it.
 * RTL climbs (RTL_ALT, cone slope), returns, hovers RTL_LOIT_TIME, lands; LAND and RTL disarm once landed, other
-  modes DISARM_DELAY after landing. Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`.
+  modes DISARM_DELAY after landing. Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`; the modes' velocity
+  commands: :mod:`sitl_bridge.ardupilot_guidance`.
 
 ``autopilot.mode`` is a :class:`CopterMode`; ``autopilot.status`` is the personality-neutral view
 (:class:`sitl_bridge.autopilot_base.FlightStatus`).
@@ -25,12 +26,13 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.ardupilot_failsafes import CopterFailsafes
+from sitl_bridge.ardupilot_guidance import CopterGuidance
 from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
 from sitl_bridge.autopilot_base import (
-    ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY,
-    MASK_YAW, MASK_YAW_RATE, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v,
-    body_to_ned, consumed_mah)
-from sitl_bridge.dynamics import HOVER, MultirotorParams, VehicleState, VelocityCommand, velocity_toward
+    ACCEPTED, DENIED, FAILED, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY, MASK_YAW, MASK_YAW_RATE,
+    UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v, body_to_ned)
+from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
 FORCE_ARM_MAGIC = 2989  # GCS_MAVLINK::magic_force_arm_value
@@ -39,7 +41,6 @@ LAND_DETECTOR_TRIGGER_S = 1.0  # land_detector.cpp: LAND_DETECTOR_TRIGGER_SEC
 LAND_WITH_PAUSE_S = 4.0  # a failsafe LAND waits this long before descending (set_mode_land_with_pause)
 RTL_ALT_MIN_M = 2.0
 RTL_MIN_CONE_SLOPE = 0.5
-HOME_REACHED_M = 1.0
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reported as ArduCopter V4.5.7, official release
 # What we implement of what ArduCopter claims (it also claims missions, FTP, attitude and global targets...).
 # No PARAM_ENCODE_BYTEWISE: ArduPilot parameters are floats.
@@ -54,7 +55,7 @@ PHASE_OF_MODE = {CopterMode.GUIDED: "guided", CopterMode.LOITER: "holding", Copt
                  CopterMode.RTL: "returning", CopterMode.LAND: "landing", CopterMode.STABILIZE: "manual"}
 
 
-class ArduCopter(CopterFailsafes, AutopilotBase):
+class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
     """Modes, arming and command handling of one simulated ArduCopter."""
 
     PARAMS_BYTEWISE = False
@@ -246,7 +247,8 @@ class ArduCopter(CopterFailsafes, AutopilotBase):
             return False
         if alt_above_home_m <= home_d - state.down_m:  # can't take off downwards
             return False
-        self.hold_target, self.taking_off, self.setpoint = (state.north_m, state.east_m, home_d - alt_above_home_m), True, None
+        self.hold_target = (state.north_m, state.east_m, home_d - alt_above_home_m)
+        self.taking_off, self.setpoint = True, None
         self._event(now, f"takeoff to {alt_above_home_m:.1f} m above home", broadcast=False)
         return True
 
@@ -291,7 +293,6 @@ class ArduCopter(CopterFailsafes, AutopilotBase):
             north, east, down = self._clamp_velocity(north, east, down)
         self.setpoint = Setpoint(now, not use_pos, north, east, down, yaw_rad, yaw_rate_rad_s)
         self.taking_off, self.guided_timed_out = False, False  # a new target ends a takeoff
-        self.setpoints_accepted += 1
         return True
 
     def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:
@@ -329,61 +330,6 @@ class ArduCopter(CopterFailsafes, AutopilotBase):
         if self.mode is CopterMode.LAND:
             return self._landing_command(now, state, self.hold_target[0], self.hold_target[1])
         return self._rtl_command(now, state)
-
-    def _takeoff_command(self, state: VehicleState) -> VelocityCommand:
-        north, east, down = self.hold_target
-        climb = self.params["WPNAV_SPEED_UP" if self.mode is CopterMode.GUIDED else "PILOT_SPEED_UP"] / 100.0
-        if abs(state.down_m - down) < ARRIVED_RADIUS_M:
-            self.taking_off = False  # complete; GUIDED and LOITER hold the takeoff point
-        return velocity_toward(state, north, east, down, self.airframe,
-                               speed_xy_mps=self.params["WPNAV_SPEED"] / 100.0, speed_z_mps=climb)
-
-    def _guided_command(self, now: float, state: VehicleState, speed_xy: float) -> VelocityCommand:
-        sp = self.setpoint
-        if sp is None:
-            return velocity_toward(state, *self.hold_target, self.airframe, speed_xy_mps=speed_xy)
-        if not sp.is_velocity:
-            cmd = velocity_toward(state, sp.north, sp.east, sp.down, self.airframe, speed_xy_mps=speed_xy)
-            return VelocityCommand(cmd.north_mps, cmd.east_mps, cmd.down_mps, sp.yaw_rad, sp.yaw_rate_rad_s)
-        if now - sp.time_s > max(self.params["GUID_TIMEOUT"], 0.1):  # ModeGuided::velaccel_control_run
-            if not self.guided_timed_out:
-                self.guided_timed_out, self.guided_timeouts = True, self.guided_timeouts + 1
-            return VelocityCommand(0.0, 0.0, 0.0, sp.yaw_rad, None)
-        return VelocityCommand(sp.north, sp.east, sp.down, sp.yaw_rad, sp.yaw_rate_rad_s)
-
-    def _landing_command(self, now: float, state: VehicleState, north: float, east: float) -> VelocityCommand:
-        """Mode::land_run_vertical_control: WPNAV_SPEED_DN (or LAND_SPEED_HIGH) high up, LAND_SPEED below
-        LAND_ALT_LOW; a failsafe LAND first holds altitude for 4 s."""
-        down = state.down_m
-        if now >= self.land_pause_until_s:
-            alt = self.home_ned[2] - state.down_m
-            fast = self.params["LAND_SPEED_HIGH"] or self.params["WPNAV_SPEED_DN"]
-            speed = (fast if alt > self.params["LAND_ALT_LOW"] / 100.0 else self.params["LAND_SPEED"]) / 100.0
-        else:
-            speed = 0.0
-        horizontal = velocity_toward(state, north, east, down, self.airframe,
-                                     speed_xy_mps=self.params["WPNAV_SPEED"] / 100.0)
-        return VelocityCommand(horizontal.north_mps, horizontal.east_mps, speed)
-
-    def _rtl_command(self, now: float, state: VehicleState) -> VelocityCommand:
-        """ModeRTL: INITIAL_CLIMB, RETURN_HOME, LOITER_AT_HOME, then FINAL_DESCENT or LAND."""
-        home_n, home_e, home_d = self.home_ned
-        speed_xy = (self.params["RTL_SPEED"] or self.params["WPNAV_SPEED"]) / 100.0
-        if self.rtl_state == "climb":
-            if state.down_m - self.rtl_return_down_m <= ARRIVED_RADIUS_M:
-                self.rtl_state = "return"
-            return velocity_toward(state, state.north_m, state.east_m, self.rtl_return_down_m, self.airframe,
-                                   speed_xy_mps=0.0, speed_z_mps=self.params["WPNAV_SPEED_UP"] / 100.0)
-        if self.rtl_state == "return":
-            if math.hypot(state.north_m - home_n, state.east_m - home_e) < HOME_REACHED_M:
-                self.rtl_state, self._rtl_loiter_since_s = "loiter", now
-            return velocity_toward(state, home_n, home_e, self.rtl_return_down_m, self.airframe, speed_xy_mps=speed_xy)
-        if self.rtl_state == "loiter" and now - self._rtl_loiter_since_s >= self.params["RTL_LOIT_TIME"] / 1000.0:
-            self.rtl_state = "land" if self.params["RTL_ALT_FINAL"] <= 0 else "final"
-        if self.rtl_state == "land":
-            return self._landing_command(now, state, home_n, home_e)
-        down = home_d - self.params["RTL_ALT_FINAL"] / 100.0 if self.rtl_state == "final" else self.rtl_return_down_m
-        return velocity_toward(state, home_n, home_e, down, self.airframe, speed_xy_mps=speed_xy)
 
     def _update_land_detector(self, now: float, state: VehicleState) -> None:
         if not state.on_ground:

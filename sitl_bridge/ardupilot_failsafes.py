@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.ardupilot_modes import CopterMode
 from sitl_bridge.autopilot_base import battery_voltage_v, consumed_mah
-from sitl_bridge.dynamics import VehicleState
+from sitl_bridge.multirotor import VehicleState
 
 FS_OPTION_CONTINUE_IF_LANDING = 8
 FS_OPTION_GCS_CONTINUE_IF_PILOT_CONTROL = 16

@@ -14,7 +14,8 @@ from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
     MASK_YAW_RATE, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent, FlightStatus, Setpoint, as_int,
     body_to_ned)
-from sitl_bridge.dynamics import HOVER, MultirotorParams, VehicleState, VelocityCommand, velocity_toward
+from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_modes import FlightMode, base_mode
 
@@ -112,7 +113,8 @@ class Autopilot(AutopilotBase):
         if mode is FlightMode.OFFBOARD and self.mode is not FlightMode.OFFBOARD and self.offboard_signal_lost(now):
             # Commander: the mode cannot run (offboard_control_signal_lost), DO_SET_MODE gets TEMPORARILY_REJECTED
             # and printRejectMode() tells a ground station (component 190) once a second.
-            if source_component == MISSION_PLANNER_COMPONENT and now - self._last_reject_print_s > REJECT_PRINT_INTERVAL_S:
+            if (source_component == MISSION_PLANNER_COMPONENT
+                    and now - self._last_reject_print_s > REJECT_PRINT_INTERVAL_S):
                 self._last_reject_print_s = now
                 self._event(now, "Switching to Offboard is currently not available", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
@@ -245,7 +247,6 @@ class Autopilot(AutopilotBase):
         self.setpoint = Setpoint(now, is_velocity, north, east, down,
                                  yaw if use_yaw else None,
                                  self._clamp_yaw_rate(yaw_rate) if use_rate else None)
-        self.setpoints_accepted += 1
         return True
 
     @staticmethod
@@ -338,7 +339,8 @@ class Autopilot(AutopilotBase):
         if math.hypot(state.north_m - home_n, state.east_m - home_e) < 1.0:
             self.rtl_landing = True
             return self._landing_command(state, home_n, home_e)
-        return velocity_toward(state, home_n, home_e, state.down_m, self.airframe, speed_xy_mps=self.params["MPC_XY_CRUISE"])
+        return velocity_toward(state, home_n, home_e, state.down_m, self.airframe,
+                               speed_xy_mps=self.params["MPC_XY_CRUISE"])
 
     def _auto_disarm(self, now: float, state: VehicleState) -> None:
         if not state.on_ground:

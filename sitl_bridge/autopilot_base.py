@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.dynamics import MultirotorParams, VehicleState, VelocityCommand
+from sitl_bridge.multirotor import MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -36,8 +36,6 @@ MASK_ACCELERATION = 0b111000000
 MASK_FORCE = 512
 MASK_YAW = 1024
 MASK_YAW_RATE = 2048
-
-PHASES = ("on_ground", "taking_off", "guided", "holding", "returning", "landing", "manual")
 
 
 def as_int(value: float, default: int = -1) -> int:
@@ -94,7 +92,7 @@ class FlightStatus:
     mode_name: str
     """The personality's own mode name (PX4: ``OFFBOARD``, ``HOLD``...; ArduPilot: ``GUIDED``, ``LOITER``...)."""
     phase: str
-    """One of :data:`PHASES`: ``on_ground`` (disarmed, or armed and landed), ``taking_off``, ``guided`` (flying the
+    """One of ``on_ground`` (disarmed, or armed and landed), ``taking_off``, ``guided`` (flying the
     companion computer's setpoints: PX4 OFFBOARD, ArduPilot GUIDED), ``holding`` (PX4 HOLD/POSCTL, ArduPilot
     LOITER/BRAKE), ``returning`` (RTL before its landing), ``landing`` (LAND, or RTL's final landing), ``manual``
     (ArduPilot STABILIZE: no pilot input, so throttle low)."""
@@ -127,7 +125,6 @@ class AutopilotBase:
         self.home_changed = False  # set when the autopilot moves home itself (the vehicle re-announces it)
         self.zoom_percent = 0.0
         self.setpoint: Setpoint | None = None
-        self.setpoints_accepted = 0
         self.setpoints_ignored: Counter[str] = Counter()
 
     def _event(self, now: float, text: str, severity: int = mavlink.MAV_SEVERITY_INFO, broadcast: bool = True) -> None:

@@ -10,11 +10,11 @@ import time
 from missions.geodesy import GeoPoint
 from missions.signing import load_key_file
 from sitl_bridge.autopilot import AutopilotEvent
-from sitl_bridge.dynamics import Wind
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile
-from sitl_bridge.vehicle import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
+from sitl_bridge.vehicle_config import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
+from sitl_bridge.wind import Wind
 
 FAILSAFE_ACTIONS = {"hold": 5, "posctl": 0, "land": 4, "rtl": 3}
 

@@ -1,10 +1,10 @@
 """Clocks that drive the simulated vehicle: one code path, two notions of time.
 
-The vehicle itself only knows simulated time: it advances by one physics tick per ``step()``. A clock
-decides when the next tick happens:
+The vehicle itself only knows simulated time: it advances by one physics tick per ``step()``. Who decides
+when the next tick happens:
 
-* :class:`LockstepClock`: nothing advances until the caller steps; runs as fast as the CPU allows and
-  is bit-reproducible (no wall time leaks into any message).
+* lockstep: the caller, by calling ``step()`` (mission replays, the tests); runs as fast as the CPU allows and
+  is bit-reproducible (no wall time leaks into any message);
 * :class:`PacedClock`: ticks are paced to real time, optionally sped up (``speed`` = simulated seconds per
   wall second), for real clients over UDP.
 """
@@ -12,18 +12,6 @@ from __future__ import annotations
 
 import math
 import time
-
-
-class LockstepClock:
-    """Simulated time only; :meth:`pace` never waits."""
-
-    speed = float("inf")
-
-    def start(self) -> None:
-        """Nothing to do: lockstep time starts when the first tick runs."""
-
-    def pace(self, sim_time_s: float) -> None:
-        """Return at once: the next tick may run immediately."""
 
 
 class PacedClock:

@@ -94,7 +94,6 @@ class UdpLink:
         self.max_peers = max_peers
         self.peers: list[tuple[str, int]] = []  # most recent last
         self.sock = _bound_socket(name, bind, socket.SOCK_DGRAM)
-        self.local_address: tuple[str, int] = self.sock.getsockname()
 
     def destinations(self) -> list[tuple[str, int]]:
         if self.remote is None or self.remote in self.peers:
@@ -139,7 +138,6 @@ class TcpServerLink:
         self.max_clients = max_clients
         self.clients: list[socket.socket] = []
         self.sock = _bound_socket(name, bind, socket.SOCK_STREAM, listen=max_clients)
-        self.local_address: tuple[str, int] = self.sock.getsockname()
 
     def _accept(self) -> None:
         while len(self.clients) < self.max_clients:

@@ -36,13 +36,15 @@ class ParamSpec:
 
 # Defaults follow PX4 v1.14 except where a comment says why not.
 PARAM_SPECS: tuple[ParamSpec, ...] = (
-    ParamSpec("MIS_TAKEOFF_ALT", REAL32, 2.5, 0.0, 500.0, "takeoff altitude above home when NAV_TAKEOFF param7 is NaN (m)"),
+    ParamSpec("MIS_TAKEOFF_ALT", REAL32, 2.5, 0.0, 500.0,
+              "takeoff altitude above home when NAV_TAKEOFF param7 is NaN (m)"),
     ParamSpec("COM_OF_LOSS_T", REAL32, 1.0, 0.0, 60.0, "time without offboard setpoints before the failsafe (s)"),
     ParamSpec("COM_OBL_RC_ACT", INT32, 0, 0, 7,
               "offboard-loss failsafe: 0 position hold (POSCTL), 3 return (RTL), 4 land, 5 hold (AUTO.LOITER)",
               allowed=(0, 3, 4, 5)),
     ParamSpec("COM_DISARM_LAND", REAL32, 2.0, -1.0, 20.0, "auto-disarm this long after landing (s); < 0 never"),
-    ParamSpec("COM_DISARM_PRFLT", REAL32, 10.0, -1.0, 60.0, "auto-disarm if armed on the ground this long without taking off (s); < 0 never"),
+    ParamSpec("COM_DISARM_PRFLT", REAL32, 10.0, -1.0, 60.0,
+              "auto-disarm if armed on the ground this long without taking off (s); < 0 never"),
     ParamSpec("MPC_XY_CRUISE", REAL32, 5.0, 0.5, 20.0, "horizontal cruise speed in auto modes such as RTL (m/s)"),
     ParamSpec("MPC_XY_VEL_MAX", REAL32, 12.0, 0.5, 20.0, "horizontal speed limit, also for offboard setpoints (m/s)"),
     ParamSpec("MPC_Z_VEL_MAX_UP", REAL32, 3.0, 0.5, 8.0, "climb speed limit (m/s)"),
@@ -57,7 +59,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0, "RTL climbs to at least this altitude above home (m)"),
     ParamSpec("BAT_CRIT_THR", REAL32, 0.07, 0.05, 0.5, "battery fraction that triggers RTL"),
     ParamSpec("BAT_EMERGEN_THR", REAL32, 0.05, 0.03, 0.5, "battery fraction that triggers an immediate landing"),
-    ParamSpec("MAV_SYS_ID", INT32, 1, 1, 250, "this vehicle's MAVLink system id (read-only here: set it on the command line)"),
+    ParamSpec("MAV_SYS_ID", INT32, 1, 1, 250,
+              "this vehicle's MAVLink system id (read-only here: set it on the command line)"),
     ParamSpec("SYS_AUTOSTART", INT32, 10016, 0, 9999999, "airframe id (10016: the SITL quadrotor)"),
     # Non-zero calibration ids: some ground stations judge sensors "calibrated" from these.
     ParamSpec("CAL_GYRO0_ID", INT32, 1311244, 0, 2**31 - 1, "gyro calibration id (non-zero = calibrated)"),

@@ -27,8 +27,9 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Callable
 from dataclasses import dataclass, fields
+
+from missions.validation import NON_NEGATIVE, POSITIVE, check_fields
 
 _TWO_PI = 2.0 * math.pi
 # Callers usually compute time as step * dt, which lands a few ulps either side of the GPS grid;
@@ -67,22 +68,10 @@ class SensorConfig:
     heading_noise_rad: float = 0.005
 
     def __post_init__(self) -> None:
-        for field in fields(self):
-            value = getattr(self, field.name)
-            allowed, in_range = _field_rule(field.name)
-            # bool is an int subclass but never a meaningful noise level or rate.
-            numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
-            if not (numeric and math.isfinite(value) and in_range(value)):
-                raise ValueError(f"SensorConfig.{field.name} must be {allowed}, got {value!r}")
-
-
-def _field_rule(name: str) -> tuple[str, Callable[[float], bool]]:
-    """The allowed range of a SensorConfig field: (wording for the error message, check)."""
-    if name == "gps_rate_hz":
-        return "in [5, 10] Hz", lambda value: 5.0 <= value <= 10.0
-    if name.endswith("time_constant_s"):
-        return "finite and > 0 s", lambda value: value > 0.0
-    return "finite and >= 0", lambda value: value >= 0.0
+        # Time constants divide (a bias with none would not wander but jump); a noise level may be 0 (off).
+        check_fields(self, [("gps_rate_hz", 5.0, 10.0)]
+                     + [(f.name, POSITIVE if f.name.endswith("time_constant_s") else NON_NEGATIVE)
+                        for f in fields(self) if f.name != "gps_rate_hz"])
 
 
 @dataclass(frozen=True)
@@ -185,11 +174,6 @@ class SensorSuite:
         """
         north, east, down = self._gps_bias
         return (north, east, down)
-
-    @property
-    def baro_bias_m(self) -> float:
-        """Current barometric bias in metres (simulator truth, for tests and diagnostics)."""
-        return self._baro_bias_m
 
     def update(
         self,

@@ -50,7 +50,8 @@ class UdpPorts:
 
 
 class VehicleServer:
-    """A :class:`SimulatedVehicle` ticking in real time (times ``speed``) over UDP/TCP, in a thread or the foreground."""
+    """A :class:`SimulatedVehicle` ticking in real time (times ``speed``) over UDP/TCP, in a thread or the
+    foreground."""
 
     def __init__(self, config: VehicleConfig | None = None, ports: UdpPorts = UdpPorts(), speed: float = 1.0,
                  on_event: Callable[[AutopilotEvent], None] | None = None, link_faults: LinkFaults | None = None):

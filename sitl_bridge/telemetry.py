@@ -9,17 +9,15 @@ AUTOPILOT_VERSION) is asked of the autopilot personality; times are the autopilo
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable
+from typing import Callable, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.autopilot_base import CELL_COUNT, CELL_NOMINAL_V, battery_voltage_v
-from sitl_bridge.telemetry_profiles import LEGACY_RATES_HZ
-
-if TYPE_CHECKING:  # the vehicle imports this module
-    from sitl_bridge.vehicle import SimulatedVehicle
-
-DEFAULT_RATES_HZ = LEGACY_RATES_HZ  # the name older code imports
+from missions.geodesy import GeoPoint, LocalFrame
+from sitl_bridge.autopilot_base import CELL_COUNT, CELL_NOMINAL_V, AutopilotBase, battery_voltage_v
+from sitl_bridge.multirotor import VehicleState
+from sitl_bridge.sensors import SensorSuite
+from sitl_bridge.vehicle_config import VehicleConfig
 
 SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
@@ -30,6 +28,28 @@ SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR
            | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
 
 UINT16_MAX = 65535
+
+
+class TelemetrySource(Protocol):
+    """What the builders read of the vehicle (:class:`sitl_bridge.vehicle.SimulatedVehicle` is one). Declared here
+    rather than imported so that this module, which the vehicle imports, does not import the vehicle."""
+
+    config: VehicleConfig
+    autopilot: AutopilotBase
+    sensors: SensorSuite
+    state: VehicleState
+    frame: LocalFrame
+    home: GeoPoint
+    origin_ned: tuple[float, float, float]
+    ground_velocity: tuple[float, float, float]
+    yaw_rate_rad_s: float
+    power_w: float
+
+    @property
+    def time_boot_ms(self) -> int: ...
+
+    @property
+    def time_since_boot_s(self) -> float: ...
 
 
 class TelemetrySchedule:
@@ -66,12 +86,12 @@ def _deg_e7(value_deg: float) -> int:
     return int(round(value_deg * 1e7))
 
 
-def heartbeat(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def heartbeat(v: TelemetrySource) -> mavlink.MAVLink_message:
     autopilot, base_mode, custom_mode, status = v.autopilot.heartbeat_fields()
     return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, autopilot, base_mode, custom_mode, status, 3)
 
 
-def sys_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def sys_status(v: TelemetrySource) -> mavlink.MAVLink_message:
     health = SENSORS
     if not v.autopilot.gps_ok:
         health &= ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
@@ -82,14 +102,14 @@ def sys_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
                                               int(round(fraction * 100)), 0, 0, 0, 0, 0, 0)
 
 
-def battery_reading(v: SimulatedVehicle) -> tuple[float, float, float]:
+def battery_reading(v: TelemetrySource) -> tuple[float, float, float]:
     """(voltage V, current A, remaining fraction) from the dynamics' energy and power."""
     fraction = max(0.0, v.state.battery_wh / v.config.airframe.battery_capacity_wh)
     volts = battery_voltage_v(fraction)
     return volts, v.power_w / volts, fraction
 
 
-def battery_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def battery_status(v: TelemetrySource) -> mavlink.MAVLink_message:
     volts, amps, fraction = battery_reading(v)
     capacity_wh = v.config.airframe.battery_capacity_wh
     used_wh = capacity_wh - v.state.battery_wh
@@ -102,13 +122,13 @@ def battery_status(v: SimulatedVehicle) -> mavlink.MAVLink_message:
         remaining_s, charge, [0, 0, 0, 0], 0, 0)
 
 
-def _estimate(v: SimulatedVehicle) -> tuple[float, float, float, float, float, float]:
+def _estimate(v: TelemetrySource) -> tuple[float, float, float, float, float, float]:
     """What the autopilot believes: GPS horizontal position/velocity and baro altitude (NED)."""
     fix = v.sensors.gps
     return fix.north_m, fix.east_m, -v.sensors.baro_alt_m, fix.vn_mps, fix.ve_mps, fix.vd_mps
 
 
-def global_position_int(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
+def global_position_int(v: TelemetrySource) -> mavlink.MAVLink_message | None:
     if v.sensors.gps is None:
         return None  # PX4 publishes no global position before it has one
     north, east, down, vn, ve, vd = _estimate(v)
@@ -120,7 +140,7 @@ def global_position_int(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
         int(round(vn * 100)), int(round(ve * 100)), int(round(vd * 100)), heading)
 
 
-def local_position_ned(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
+def local_position_ned(v: TelemetrySource) -> mavlink.MAVLink_message | None:
     if v.sensors.gps is None:
         return None
     north, east, down, vn, ve, vd = _estimate(v)
@@ -129,12 +149,12 @@ def local_position_ned(v: SimulatedVehicle) -> mavlink.MAVLink_message | None:
                                                       down - origin_d, vn, ve, vd)
 
 
-def attitude(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def attitude(v: TelemetrySource) -> mavlink.MAVLink_message:
     roll, pitch, yaw = v.sensors.attitude_rpy
     return mavlink.MAVLink_attitude_message(v.time_boot_ms, roll, pitch, yaw, 0.0, 0.0, v.yaw_rate_rad_s)
 
 
-def gps_raw_int(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def gps_raw_int(v: TelemetrySource) -> mavlink.MAVLink_message:
     fix = v.sensors.gps
     time_usec = int(v.time_since_boot_s * 1e6)
     if fix is None:
@@ -147,7 +167,7 @@ def gps_raw_int(v: SimulatedVehicle) -> mavlink.MAVLink_message:
         int(fix.epv_m * 100), int(round(math.hypot(fix.vn_mps, fix.ve_mps) * 100)), course, fix.satellites)
 
 
-def vfr_hud(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def vfr_hud(v: TelemetrySource) -> mavlink.MAVLink_message:
     vn, ve, vd = v.ground_velocity
     heading = int(round(math.degrees(v.sensors.attitude_rpy[2]))) % 360
     hover_share = v.power_w / v.config.airframe.hover_power_w if v.autopilot.armed else 0.0
@@ -157,12 +177,12 @@ def vfr_hud(v: SimulatedVehicle) -> mavlink.MAVLink_message:
                                            math.hypot(vn, ve), heading, throttle, alt_amsl, -vd)
 
 
-def extended_sys_state(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def extended_sys_state(v: TelemetrySource) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED,
                                                       v.autopilot.landed_state(v.state))
 
 
-def home_position(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def home_position(v: TelemetrySource) -> mavlink.MAVLink_message:
     home = v.home
     home_n, home_e, home_d = v.autopilot.home_ned
     origin_n, origin_e, origin_d = v.origin_ned
@@ -172,14 +192,14 @@ def home_position(v: SimulatedVehicle) -> mavlink.MAVLink_message:
                                                  int(v.time_since_boot_s * 1e6))
 
 
-def autopilot_version(v: SimulatedVehicle) -> mavlink.MAVLink_message:
+def autopilot_version(v: TelemetrySource) -> mavlink.MAVLink_message:
     ap = v.autopilot
     return mavlink.MAVLink_autopilot_version_message(
         ap.CAPABILITIES, ap.FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
         0x5349_4D00_0000_0000 | v.config.system_id)  # "SIM" + system id: stable across runs
 
 
-BUILDERS: dict[int, Callable[[SimulatedVehicle], mavlink.MAVLink_message | None]] = {
+BUILDERS: dict[int, Callable[[TelemetrySource], mavlink.MAVLink_message | None]] = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,

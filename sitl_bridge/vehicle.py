@@ -14,90 +14,25 @@ the vehicle then is.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
-from missions.signing import KEY_BYTES, LinkSigning, simulated_timestamp
-from missions.validation import check_fields, check_number
+from missions.signing import LinkSigning, simulated_timestamp
 from sitl_bridge import dynamics, telemetry
 from sitl_bridge.ardupilot import ArduCopter
 from sitl_bridge.ardupilot_params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
 from sitl_bridge.autopilot import Autopilot
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
-from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
+from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.link import Link
 from sitl_bridge.params import ParameterStore
-from sitl_bridge.sensors import SensorConfig, SensorSuite
+from sitl_bridge.sensors import SensorSuite
 from sitl_bridge.signing import vehicle_signing
-from sitl_bridge.telemetry_profiles import PROFILES, link_rates_hz, resolve_profile
+from sitl_bridge.telemetry_profiles import link_rates_hz, resolve_profile
+from sitl_bridge.vehicle_config import VehicleConfig
 from sitl_bridge.vehicle_messages import MessageHandlers
-
-__all__ = ["AUTOPILOT_COMPONENT", "AUTOPILOT_TYPES", "DEFAULT_HOME", "Endpoint", "SimulatedVehicle", "VehicleConfig"]
-
-DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
-AUTOPILOT_TYPES = ("px4", "ardupilot")
-
-
-@dataclass(frozen=True)
-class VehicleConfig:
-    """Everything that defines one simulated vehicle; the same config and seed give the same flight."""
-
-    home: GeoPoint = DEFAULT_HOME
-    """Geodetic home: the local NED origin, where the vehicle starts on the ground."""
-    physics_rate_hz: float = 100.0
-    """Physics ticks per simulated second (>= 100)."""
-    seed: int = 0
-    """Seeds the sensor noise (the only randomness in the vehicle)."""
-    system_id: int = 1
-    """MAVLink system id of the vehicle (component id is always 1, the autopilot)."""
-    airframe: dynamics.MultirotorParams = field(default_factory=dynamics.MultirotorParams)
-    """Physical limits, time constants and battery of the multirotor."""
-    wind: dynamics.Wind = field(default_factory=dynamics.Wind)
-    """Steady wind and gusts."""
-    sensors: SensorConfig = field(default_factory=SensorConfig)
-    """GPS, barometer and attitude noise."""
-    params: dict[str, float] = field(default_factory=dict)
-    """Parameter overrides by name, of the chosen autopilot (PX4: sitl_bridge.params.PARAM_SPECS, ArduPilot:
-    sitl_bridge.ardupilot_params.ARDUPILOT_PARAM_SPECS)."""
-    telemetry_rates_hz: dict[int, float] = field(default_factory=dict)
-    """Overrides of the profile's stream rates by message id, on every link (0 disables a stream)."""
-    signing_key: bytes | None = field(default=None, repr=False)
-    """MAVLink 2 signing secret (32 bytes, see missions.signing.load_key_file); None: no signing."""
-    autopilot: str = "px4"
-    """The autopilot personality: "px4" (PX4 custom modes, OFFBOARD) or "ardupilot" (ArduCopter modes, GUIDED)."""
-    telemetry_profile: str = "default"
-    """Default stream rates (sitl_bridge.telemetry_profiles): "default" ("legacy" for PX4, "ardupilot" for
-    ArduPilot), "legacy" (this simulator's historic rates; replays stay byte-identical), "px4" (PX4's onboard mode
-    on API links, normal mode on the GCS link), "px4_sitl" (as px4 SITL starts them) or "ardupilot" (SRn_* = 0:
-    only HEARTBEAT until a client asks for streams)."""
-    boot_time_s: float = 0.0
-    """The autopilot booted this long before the simulation starts (s, [0, 1e7]; rounded to the physics tick):
-    time_boot_ms, TIMESYNC and the other boot-relative times start there, e.g. 600 for an autopilot up 10 minutes."""
-    reboot_at_s: float | None = None
-    """Simulated time (s, [0, 1e7]) at which the autopilot reboots; None: never."""
-    reboot_downtime_s: float = 5.0
-    """How long a reboot keeps the autopilot silent, motors off (s, [0.1, 600]); it then boots afresh."""
-
-    def __post_init__(self) -> None:
-        if not 100.0 <= self.physics_rate_hz <= 2000.0:
-            raise ValueError(f"physics_rate_hz must be in [100, 2000], got {self.physics_rate_hz}")
-        if not 1 <= self.system_id <= 250:
-            raise ValueError(f"system_id must be in [1, 250], got {self.system_id}")
-        if self.signing_key is not None and len(self.signing_key) != KEY_BYTES:
-            raise ValueError(f"signing_key must be {KEY_BYTES} bytes, got {len(self.signing_key)}; "
-                             "load it with missions.signing.load_key_file")
-        if self.autopilot not in AUTOPILOT_TYPES:
-            raise ValueError(f"VehicleConfig.autopilot must be one of {', '.join(AUTOPILOT_TYPES)}, "
-                             f"got {self.autopilot!r}")
-        if self.telemetry_profile not in PROFILES:
-            raise ValueError(f"VehicleConfig.telemetry_profile must be one of {', '.join(PROFILES)}, "
-                             f"got {self.telemetry_profile!r}")
-        check_fields(self, (("boot_time_s", 0.0, 1e7), ("reboot_downtime_s", 0.1, 600.0)))
-        if self.reboot_at_s is not None:
-            check_number(type(self).__name__, "reboot_at_s", self.reboot_at_s, 0.0, 1e7)
 
 
 def make_autopilot(config: VehicleConfig, params: ParameterStore, home_alt_m: float) -> AutopilotBase:
@@ -276,8 +211,8 @@ class SimulatedVehicle(MessageHandlers):
         self._boot_tick = self.tick  # the new boot: time_boot_ms counts from here
         self.autopilot.armed = False
         self.reboots += 1
-        self.log(f"autopilot rebooting at {self.time_s:.2f} s ({'in the air' if not self.state.on_ground else 'on the ground'}), "
-                 f"back in {self.config.reboot_downtime_s:g} s")
+        where = "on the ground" if self.state.on_ground else "in the air"
+        self.log(f"autopilot rebooting at {self.time_s:.2f} s ({where}), back in {self.config.reboot_downtime_s:g} s")
 
     def _power_on(self) -> None:
         """The autopilot is up again: fresh state in its boot mode, fresh MAVLink sequence numbers and streams

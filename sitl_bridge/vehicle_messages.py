@@ -6,28 +6,47 @@ the rest by the autopilot personality. Parameters travel PX4's way (integers byt
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge import telemetry
-from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, as_int
+from missions.signing import LinkSigning
+from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
-from sitl_bridge.params import decode_bytewise, decode_float, encode_bytewise
+from sitl_bridge.multirotor import VehicleState
+from sitl_bridge.params import ParameterStore, decode_bytewise, decode_float, encode_bytewise
 from sitl_bridge.signing import requested_key
 from sitl_bridge.telemetry_profiles import ARDUPILOT_STREAM_MESSAGES, DATA_STREAM_GROUPS, STREAM_GROUPS
-
-if TYPE_CHECKING:
-    from sitl_bridge.vehicle import SimulatedVehicle
+from sitl_bridge.vehicle_config import VehicleConfig
 
 CAMERA_COMPONENT = mavlink.MAV_COMP_ID_CAMERA  # zoom commands may be addressed to the camera
 REQUESTABLE = (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
 
 
 class MessageHandlers:
-    """The ``_on_<MESSAGE>`` handlers; :meth:`handlers` maps message names to them."""
+    """The ``_on_<MESSAGE>`` handlers; :meth:`handlers` maps message names to them.
 
-    def handlers(self: SimulatedVehicle) -> dict:
+    What they use of the vehicle is declared here and set by :class:`~sitl_bridge.vehicle.SimulatedVehicle`, so
+    that this module, which the vehicle imports, does not import the vehicle.
+    """
+
+    config: VehicleConfig
+    params: ParameterStore
+    autopilot: AutopilotBase
+    state: VehicleState
+    endpoints: list[Endpoint]
+    signing: LinkSigning | None
+    setup_signing_refused: int
+    is_ardupilot: bool
+    dt_s: float
+    time_s: float
+    time_since_boot_s: float
+    log: Callable[[str], None]
+    broadcast: Callable[[mavlink.MAVLink_message], None]
+    _enable_signing: Callable[[bytes], None]
+
+    def handlers(self) -> dict:
         table = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -45,21 +64,21 @@ class MessageHandlers:
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
         return table
 
-    def _for_us(self: SimulatedVehicle, msg: mavlink.MAVLink_message,
+    def _for_us(self, msg: mavlink.MAVLink_message,
                 components: tuple[int, ...] = (AUTOPILOT_COMPONENT,)) -> bool:
         return (msg.target_system in (0, self.config.system_id)
                 and msg.target_component in (0, *components))
 
     # ------------------------------------------------------------------ commands
-    def _on_command_long(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_command_long(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
         self._execute(endpoint, msg, msg.command, params, frame=None)
 
-    def _on_command_int(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_command_int(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
         self._execute(endpoint, msg, msg.command, params, frame=msg.frame)
 
-    def _execute(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message, command: int,
+    def _execute(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, command: int,
                  p: tuple[float, ...], frame: int | None) -> None:
         if not self._for_us(msg, (AUTOPILOT_COMPONENT, CAMERA_COMPONENT)):
             return
@@ -71,7 +90,8 @@ class MessageHandlers:
                   and endpoint.set_message_interval(msg_id, p[1], now, self.dt_s))
             result = ACCEPTED if ok else DENIED
         elif command in REQUESTABLE:
-            msg_id = as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            msg_id = (as_int(p[0]) if command == mavlink.MAV_CMD_REQUEST_MESSAGE
+                      else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             builder = telemetry.BUILDERS.get(msg_id)
             follow_up = builder(self) if builder else None
             result = ACCEPTED if follow_up is not None else DENIED
@@ -89,7 +109,7 @@ class MessageHandlers:
             self.log(f"command {_command_name(command)} from {msg.get_srcSystem()}/{msg.get_srcComponent()}: "
                      f"{_result_name(result)}")
 
-    def _on_request_data_stream(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_request_data_stream(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         """GCS_MAVLINK::handle_request_data_stream: start_stop 1 streams the group at req_message_rate, 0 stops it;
         MAV_DATA_STREAM_ALL sets every group. The link's SRn_ parameters take the rates. No ACK."""
         if not self._for_us(msg) or msg.start_stop not in (0, 1):
@@ -108,13 +128,13 @@ class MessageHandlers:
             endpoint.set_stream_rate(ARDUPILOT_STREAM_MESSAGES[group], rate, self.time_s)
         self.log(f"REQUEST_DATA_STREAM on link {endpoint.index}: {', '.join(groups)} at {rate:g} Hz")
 
-    def _on_setpoint(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_setpoint(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if not self._for_us(msg):
             return
         self.autopilot.handle_setpoint(self.time_s, self.state, msg.coordinate_frame, msg.type_mask,
                                        (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
 
-    def _on_set_mode(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_set_mode(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         """The legacy SET_MODE message: PX4 sends no ACK, ArduPilot a COMMAND_ACK with command 11."""
         if msg.target_system != self.config.system_id:
             return
@@ -123,22 +143,22 @@ class MessageHandlers:
             endpoint.send(mavlink.MAVLink_command_ack_message(mavlink.MAVLINK_MSG_ID_SET_MODE, result, 0, 0,
                                                               msg.get_srcSystem(), msg.get_srcComponent()))
 
-    def _on_heartbeat(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_heartbeat(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         self.autopilot.on_heartbeat(msg.get_srcSystem(), self.time_s)
 
     # ------------------------------------------------------------------ parameters
-    def _param_value(self: SimulatedVehicle, name: str) -> mavlink.MAVLink_message:
+    def _param_value(self, name: str) -> mavlink.MAVLink_message:
         spec = self.params.specs[name]
         value = encode_bytewise(self.params[name], spec.kind) if self.autopilot.PARAMS_BYTEWISE else self.params[name]
         return mavlink.MAVLink_param_value_message(name.encode(), value, spec.kind, len(self.params),
                                                    self.params.index(name))
 
-    def _on_param_request_list(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_param_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if self._for_us(msg):
             for name in self.params.names:
                 endpoint.send(self._param_value(name))
 
-    def _on_param_request_read(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_param_request_read(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if not self._for_us(msg):
             return
         if msg.param_index >= 0:
@@ -147,7 +167,7 @@ class MessageHandlers:
         elif _param_name(msg.param_id) in self.params.specs:
             endpoint.send(self._param_value(_param_name(msg.param_id)))
 
-    def _on_param_set(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_param_set(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if not self._for_us(msg):
             return
         name = _param_name(msg.param_id)
@@ -162,16 +182,16 @@ class MessageHandlers:
         self.broadcast(self._param_value(name))
 
     # ------------------------------------------------------------------ small protocol services
-    def _on_timesync(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_timesync(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if msg.tc1 == 0:  # a request: answer with our time since boot in ns
             endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_since_boot_s * 1e9), msg.ts1))
 
-    def _on_mission_request_list(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_mission_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if self._for_us(msg):  # no missions are stored; saying so stops ground stations waiting
             endpoint.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
                                                                 msg.mission_type))
 
-    def _on_setup_signing(self: SimulatedVehicle, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+    def _on_setup_signing(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         # No ACK in the protocol: the sender learns the outcome from whether our next frames verify.
         if not self._for_us(msg):
             return
@@ -206,4 +226,3 @@ def _command_name(command: int) -> str:
 
 def _result_name(result: int) -> str:
     return mavlink.enums["MAV_RESULT"][result].name.removeprefix("MAV_RESULT_")
-

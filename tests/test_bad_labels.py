@@ -16,7 +16,8 @@ from cli_harness import assert_clean_error, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from missions.datasets import MAX_PROBLEMS_KEPT, DatasetError, YoloDataset
+from missions.datasets import YoloDataset
+from missions.yolo_labels import MAX_PROBLEMS_KEPT, DatasetError
 
 NAMES = ("person", "boat", "debris")
 FUZZ = settings(max_examples=300, derandomize=True, deadline=None, database=None,

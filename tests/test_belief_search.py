@@ -18,10 +18,11 @@ from missions.belief_search import (
     UNRESOLVED,
     BeliefSearchState,
 )
+from missions.coverage import GRID_SIZE
 from missions.goals import TRACK_OBJECT
 from missions.mission import FlightSettings
 from missions.scenario import Conditions, Scenario, SearchArea, Target
-from missions.search import GRID_SIZE, OBJECT_SIZE_M, RESOLUTION_SCALE, ScenarioBatch
+from missions.search import OBJECT_SIZE_M, RESOLUTION_SCALE, ScenarioBatch
 
 AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)
 CELL_M = 1000.0 / GRID_SIZE

@@ -36,7 +36,7 @@ def test_unknown_command_is_a_one_line_error():
     (["--home", "47.3,8.5"], "--home: expected 3 comma-separated numbers"),
     (["--home", "95,8.5,400"], "lat_deg"),
     (["--speed", "0"], "speed must be > 0"),
-    (["--rate", "20"], "physics_rate_hz must be in [100, 2000]"),
+    (["--rate", "20"], "VehicleConfig.physics_rate_hz must be a number in [100, 2000]"),
     (["--param", "MPC_XY_CRUISE=99"], "MPC_XY_CRUISE: 99 is outside"),
     (["--param", "NOPE=1"], "unknown parameter 'NOPE'"),
 ])

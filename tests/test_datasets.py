@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 import yaml
 
-from missions.datasets import (DatasetError, ImageScenarioConfig, YoloDataset, label_path_for, scenario_from_item)
+from missions.datasets import YoloDataset
+from missions.image_scenarios import ImageScenarioConfig, scenario_from_item
+from missions.yolo_labels import DatasetError, label_path_for
 from missions.scenario import CATEGORIES
 from missions.synthetic import make_synthetic_dataset, split_counts
 

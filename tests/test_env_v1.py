@@ -172,5 +172,5 @@ def test_meta_returned_reward_is_refused_on_a_task_without_a_return_home():
 
     with pytest.raises(ValueError, match="meta_returned_reward applies to SarSearch-v1 only"):
         TrainConfig(task="SarSearch-v0", meta_returned_reward=0.0, low_level_ignores=("coverage",))
-    with pytest.raises(ValueError, match=r"TrainConfig.meta_returned_reward must be in \[-1000, 1000\]"):
+    with pytest.raises(ValueError, match=r"TrainConfig.meta_returned_reward must be a number in \[-1000, 1000\]"):
         TrainConfig(meta_returned_reward=float("nan"))

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from missions.generator import (SPLIT_SEED_STRIDE, SPLITS, TASK_V1, GeneratorConfig, generate_scenario,
-                                generate_split, scenario_name, scenario_seeds, split_seed)
+                                scenario_name, scenario_seeds, split_seed)
 from missions.scenario import Weather
 
 
 @pytest.fixture(scope="module")
 def many():
     """2,000 training scenarios (about a quarter of a second)."""
-    return generate_split("train", 2000)
+    return [generate_scenario(seed) for seed in scenario_seeds("train", 2000)]
 
 
 def test_same_seed_same_scenario_and_different_seeds_differ():
@@ -23,7 +23,7 @@ def test_same_seed_same_scenario_and_different_seeds_differ():
     config = GeneratorConfig(area_size_m=600.0, min_datum_distance_m=150.0, max_obstacles=6)
     assert generate_scenario(7, config) == generate_scenario(7, config)
     assert generate_scenario(7, config) != generate_scenario(7)
-    datums = {(s.datum_north_m, s.datum_east_m) for s in generate_split("val", 50)}
+    datums = {(s.datum_north_m, s.datum_east_m) for s in [generate_scenario(seed) for seed in scenario_seeds("val", 50)]}
     assert len(datums) == 50
 
 
@@ -32,7 +32,7 @@ def test_splits_are_disjoint_and_stable():
     assert not seeds["train"] & seeds["val"] and not seeds["train"] & seeds["test"] and not seeds["val"] & seeds["test"]
     assert scenario_seeds("test", 10) == scenario_seeds("test", 20)[:10]  # growing a split keeps its prefix
     assert scenario_seeds("test", 18)[17] == 2 * SPLIT_SEED_STRIDE + 17
-    scenario = generate_split("test", 18)[17]
+    scenario = [generate_scenario(seed) for seed in scenario_seeds("test", 18)][17]
     assert scenario.name == "gen-test-000017" and scenario.seed == 2 * SPLIT_SEED_STRIDE + 17
     assert scenario_name(5) == "gen-train-000005" and scenario_name(3 * SPLIT_SEED_STRIDE) == "gen-seed-3000000000"
     assert [split_seed("val", i) for i in range(30)] == scenario_seeds("val", 30)

@@ -15,9 +15,7 @@ from missions.geodesy import (
     GeoPoint,
     LocalFrame,
     ecef_to_geodetic,
-    geodetic_from_ned,
     geodetic_to_ecef,
-    ned_from_geodetic,
 )
 
 E2 = WGS84_F * (2 - WGS84_F)
@@ -78,9 +76,9 @@ def test_ned_geodetic_ned_round_trip_below_1_mm(home: GeoPoint) -> None:
 def test_function_api_matches_frame_and_round_trips(home: GeoPoint) -> None:
     frame = LocalFrame(home)
     for n, e, d in sample_offsets(random.Random(11), 50):
-        geo = geodetic_from_ned(home, n, e, d)
+        geo = LocalFrame(home).to_geodetic(n, e, d)
         assert geo == frame.to_geodetic(n, e, d)
-        assert math.dist(ned_from_geodetic(home, *geo), (n, e, d)) < ROUND_TRIP_TOL_M
+        assert math.dist(LocalFrame(home).to_ned(*geo), (n, e, d)) < ROUND_TRIP_TOL_M
 
 
 @settings(max_examples=300, deadline=None)
@@ -96,14 +94,14 @@ def test_round_trip_property_anywhere_on_earth(
     lat: float, lon: float, alt: float, north: float, east: float, down: float
 ) -> None:
     home = GeoPoint(lat, lon, alt)
-    geo = geodetic_from_ned(home, north, east, down)
-    assert math.dist(ned_from_geodetic(home, *geo), (north, east, down)) < ROUND_TRIP_TOL_M
+    geo = LocalFrame(home).to_geodetic(north, east, down)
+    assert math.dist(LocalFrame(home).to_ned(*geo), (north, east, down)) < ROUND_TRIP_TOL_M
 
 
 def test_home_maps_to_origin_and_back() -> None:
     for home in HOMES.values():
-        assert max(abs(v) for v in ned_from_geodetic(home, home.lat_deg, home.lon_deg, home.alt_m)) < 1e-6
-        lat, lon, alt = geodetic_from_ned(home, 0.0, 0.0, 0.0)
+        assert max(abs(v) for v in LocalFrame(home).to_ned(home.lat_deg, home.lon_deg, home.alt_m)) < 1e-6
+        lat, lon, alt = LocalFrame(home).to_geodetic(0.0, 0.0, 0.0)
         assert lat == pytest.approx(home.lat_deg, abs=1e-12)
         assert alt == pytest.approx(home.alt_m, abs=1e-6)
         if abs(home.lat_deg) < 89.99:  # longitude is ill-conditioned right at the pole
@@ -112,15 +110,15 @@ def test_home_maps_to_origin_and_back() -> None:
 
 def test_antimeridian_crossing_20_km_east() -> None:
     home = GeoPoint(-12.0, 179.9, 15.0)
-    lat, lon, alt = geodetic_from_ned(home, 0.0, 20_000.0, 0.0)
+    lat, lon, alt = LocalFrame(home).to_geodetic(0.0, 20_000.0, 0.0)
     # 20 km east of 179.9 E is past 180: longitude wraps to the western hemisphere.
     parallel_radius = prime_vertical_radius_m(home.lat_deg) * math.cos(math.radians(home.lat_deg))
     expected_dlon = math.degrees(20_000.0 / parallel_radius)
     assert lon < 0.0
     assert lon == pytest.approx(179.9 + expected_dlon - 360.0, abs=1e-4)
-    assert math.dist(ned_from_geodetic(home, lat, lon, alt), (0.0, 20_000.0, 0.0)) < ROUND_TRIP_TOL_M
+    assert math.dist(LocalFrame(home).to_ned(lat, lon, alt), (0.0, 20_000.0, 0.0)) < ROUND_TRIP_TOL_M
     # Either spelling of the same longitude gives the same local position.
-    assert math.dist(ned_from_geodetic(home, lat, lon + 360.0, alt), (0.0, 20_000.0, 0.0)) < ROUND_TRIP_TOL_M
+    assert math.dist(LocalFrame(home).to_ned(lat, lon + 360.0, alt), (0.0, 20_000.0, 0.0)) < ROUND_TRIP_TOL_M
 
 
 def test_geodetic_ecef_round_trip_precision() -> None:
@@ -151,19 +149,19 @@ def test_length_of_one_degree_of_latitude(lat_deg: float, metres_per_degree: flo
     # + 1.175 cos 4lat gives 110574.3 and 111131.8). Measure over +-0.0005 deg so that the
     # tangent-plane projection differs from the arc length by nanometres.
     home = GeoPoint(lat_deg, 10.0, 0.0)
-    north_hi = ned_from_geodetic(home, lat_deg + 0.0005, 10.0, 0.0)[0]
-    north_lo = ned_from_geodetic(home, lat_deg - 0.0005, 10.0, 0.0)[0]
+    north_hi = LocalFrame(home).to_ned(lat_deg + 0.0005, 10.0, 0.0)[0]
+    north_lo = LocalFrame(home).to_ned(lat_deg - 0.0005, 10.0, 0.0)[0]
     assert (north_hi - north_lo) / 0.001 == pytest.approx(metres_per_degree, abs=1.0)
 
 
 @pytest.mark.parametrize("home", HOMES.values(), ids=HOMES.keys())
 def test_one_metre_steps_follow_radii_of_curvature(home: GeoPoint) -> None:
-    lat, lon, _ = geodetic_from_ned(home, 1.0, 0.0, 0.0)
+    lat, lon, _ = LocalFrame(home).to_geodetic(1.0, 0.0, 0.0)
     expected_dlat = math.degrees(1.0 / (meridian_radius_m(home.lat_deg) + home.alt_m))
     assert lat - home.lat_deg == pytest.approx(expected_dlat, rel=1e-6)
     if abs(home.lat_deg) < 89.99:
         assert lon == pytest.approx(home.lon_deg, abs=1e-12)
-        _, lon_e, _ = geodetic_from_ned(home, 0.0, 1.0, 0.0)
+        _, lon_e, _ = LocalFrame(home).to_geodetic(0.0, 1.0, 0.0)
         normal_radius = prime_vertical_radius_m(home.lat_deg) + home.alt_m
         parallel_radius = normal_radius * math.cos(math.radians(home.lat_deg))
         assert lon_e - home.lon_deg == pytest.approx(math.degrees(1.0 / parallel_radius), rel=1e-6)
@@ -171,10 +169,10 @@ def test_one_metre_steps_follow_radii_of_curvature(home: GeoPoint) -> None:
 
 @pytest.mark.parametrize("home", HOMES.values(), ids=HOMES.keys())
 def test_down_is_minus_up(home: GeoPoint) -> None:
-    lat, lon, alt = geodetic_from_ned(home, 0.0, 0.0, -100.0)
+    lat, lon, alt = LocalFrame(home).to_geodetic(0.0, 0.0, -100.0)
     assert alt == pytest.approx(home.alt_m + 100.0, abs=1e-6)
     assert lat == pytest.approx(home.lat_deg, abs=1e-10)
-    north, east, down = ned_from_geodetic(home, home.lat_deg, home.lon_deg, home.alt_m + 250.0)
+    north, east, down = LocalFrame(home).to_ned(home.lat_deg, home.lon_deg, home.alt_m + 250.0)
     assert down == pytest.approx(-250.0, abs=1e-6)
     assert abs(north) < 1e-6 and abs(east) < 1e-6
 

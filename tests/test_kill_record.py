@@ -22,7 +22,7 @@ from test_runner import small_mission
 
 from autonomy.policy import load_policy
 from autonomy.recorder import PartialReport
-from missions.mission_file import save_mission
+from missions.mission_writer import save_mission
 from simulation.mission_replay import replay_mission
 
 HRLSAC = [sys.executable, "-m", "hrlsac_cli"]

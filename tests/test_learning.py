@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from missions.mission import FlightSettings, Mission
-from missions.mission_file import save_mission
+from missions.mission_writer import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.core import SarSearchConfig

@@ -22,7 +22,7 @@ import hrlsac_cli
 from autonomy.link_loss import LinkLossConfig
 from autonomy.policy import Policy, load_policy
 from autonomy.runner import RunnerConfig
-from missions.mission_file import save_mission
+from missions.mission_writer import save_mission
 from simulation import mission_replay as replay_module
 from simulation.flight_outcome import FlyawayLimits
 from simulation.mission_replay import airframe_for, replay_mission, start_point

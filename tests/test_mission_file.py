@@ -17,8 +17,9 @@ from hypothesis import strategies as st
 
 from missions.geodesy import GeoPoint
 from missions.mission import FlightSettings, Mission
-from missions.mission_file import (GENERATOR_SPLITS, LIBRARY_DIR, MissionFileError, load_mission, mission_from_dict,
-                                   mission_to_dict, save_mission)
+from missions.mission_file import LIBRARY_DIR, MissionFileError, load_mission, mission_from_dict
+from missions.mission_sections import GENERATOR_SPLITS
+from missions.mission_writer import mission_to_dict, save_mission
 from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay,
                                Weather)
 
@@ -249,7 +250,7 @@ ERRORS = {
     "visibility range": (changed(scenario__conditions__visibility=0.1),
                          "scenario.conditions.visibility: must be a number in [0.3, 1], got 0.1"),
     "latitude range": (changed(scenario__home__lat_deg=100),
-                       "scenario.home.lat_deg: must be a finite number in [-90, 90] deg, got 100"),
+                       "scenario.home.lat_deg: must be a number in [-90, 90], got 100"),
     "both inline and generator": (changed(scenario__generator={"split": "test", "index": 3}),
                                   f"scenario: {EXACTLY_ONE} generator and inline fields ({ALL_INLINE})"),
     "generator and dataset": (changed(scenario={"generator": {"seed": 1}, "dataset": {"root": "."}}),
@@ -412,8 +413,9 @@ def test_generated_mission_can_be_frozen_inline(tmp_path: Path) -> None:
 # ------------------------------------------------------------------------------------------------ dataset
 
 def fake_datasets(monkeypatch: pytest.MonkeyPatch, roots: list[Path]) -> None:
-    """A stand-in missions.datasets listing <root>/images/<split>/; img_0041 has no victim (no scenario)."""
-    module = types.ModuleType("missions.datasets")
+    """Stand-ins for missions.datasets, listing <root>/images/<split>/, and missions.image_scenarios, in which
+    img_0041 has no victim (no scenario)."""
+    module, scenarios = types.ModuleType("missions.datasets"), types.ModuleType("missions.image_scenarios")
 
     class YoloDataset:
         def __init__(self, root: Path) -> None:
@@ -434,8 +436,9 @@ def fake_datasets(monkeypatch: pytest.MonkeyPatch, roots: list[Path]) -> None:
     def image_seed(seed: int, split: str, index: int) -> int:  # any injective stand-in will do here
         return seed * 1000 + index
 
-    module.YoloDataset, module.scenario_from_item, module.image_seed = YoloDataset, scenario_from_item, image_seed
+    module.YoloDataset, scenarios.scenario_from_item, scenarios.image_seed = YoloDataset, scenario_from_item, image_seed
     monkeypatch.setitem(sys.modules, "missions.datasets", module)
+    monkeypatch.setitem(sys.modules, "missions.image_scenarios", scenarios)
 
 
 @pytest.fixture

@@ -27,7 +27,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from autonomy.policy import Policy, load_policy
 from autonomy.vehicle_link import COMPANION_COMPONENT
 from missions.mission import FlightSettings, Mission
-from missions.mission_file import save_mission
+from missions.mission_writer import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import export_policy

@@ -217,7 +217,7 @@ def test_action_margin_widens_the_policy_range_and_clips_to_the_environment():
     assert ActionScaler(ENV_LOW, ENV_HIGH).flown(plain) is plain  # no margin: the action as it is
     with pytest.raises(ValueError, match="action margin must be a finite number >= 0, got -0.1"):
         ActionScaler(ENV_LOW, ENV_HIGH, margin=-0.1)
-    with pytest.raises(ValueError, match=r"TrainConfig.action_margin must be in \[0, 1\], got 1.5"):
+    with pytest.raises(ValueError, match=r"TrainConfig.action_margin must be a number in \[0, 1\], got 1.5"):
         small_config(action_margin=1.5)
 
 
@@ -533,7 +533,7 @@ def test_the_low_level_and_flat_sac_discount_by_their_own_gamma():
     hrl = small_config(algo="hrl-sac", low_level_gamma=0.9)
     assert SAC(3, 2, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), hrl, seed=0).gamma == 0.9
     assert TrainConfig.from_preset("paper").sac_gamma == 0.99  # the paper's table
-    with pytest.raises(ValueError, match="TrainConfig.low_level_gamma must be in"):
+    with pytest.raises(ValueError, match="TrainConfig.low_level_gamma must be a number in"):
         TrainConfig(low_level_gamma=1.5)
 
 

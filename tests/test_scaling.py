@@ -24,7 +24,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from missions.mission import FlightSettings, Mission
-from missions.mission_file import load_mission, save_mission
+from missions.mission_file import load_mission
+from missions.mission_writer import save_mission
 from missions.scenario import Scenario, SearchArea, Target
 from policies.evaluation.parallel import evaluate_checkpoint
 from policies.reports.sweep_table import DONE, FAILED, SKIPPED, ProgressTable, RunStatus, render
@@ -135,7 +136,7 @@ def test_ray_without_ray_installed_is_one_clear_line(tmp_path):
     ({"grid": {"learning_rat": [0.1]}}, "grid.learning_rat", "unknown TrainConfig field 'learning_rat'"),
     ({"grid": {"flight.max_step": [100]}}, "grid.flight.max_step", "unknown TrainConfig field 'flight.max_step'"),
     ({"grid": {"seed": [1, 2]}}, "seed", "set by the sweep's own keys"),
-    ({"grid": {"learning_rate": [5.0]}}, "grid", "TrainConfig.learning_rate must be in [1e-07, 1]"),
+    ({"grid": {"learning_rate": [5.0]}}, "grid", "TrainConfig.learning_rate must be a number in [1e-07, 1]"),
     ({"grid": {"learning_rate": 0.1}}, "grid.learning_rate", "must be a non-empty list"),
     ({"set": {"flight": 3}}, "set.flight", "flight is a group of fields"),
 ])

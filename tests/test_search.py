@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from missions.coverage import GRID_SIZE, OBS_GRID, cover, downsample_coverage
 from missions.generator import generate_scenario
 from missions.mission import Mission
 from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay,
                                Weather)
-from missions.search import (GRID_SIZE, LEEWAY, OBS_GRID, SEA_FACTOR, SEA_FACTOR_BY_CATEGORY, ScenarioBatch,
-                             cover, coverage_ratio, detected_categories, detection_probability, distance_to_primary,
-                             downsample_coverage, drift_targets, footprint_half_width_m, grid_cell, inside_obstacle,
-                             outside_fence, sample_detections, target_drift_velocity, target_reached)
+from missions.search import (LEEWAY, SEA_FACTOR, SEA_FACTOR_BY_CATEGORY, ScenarioBatch, detected_categories,
+                             detection_probability, distance_to_primary, drift_targets, footprint_half_width_m,
+                             inside_obstacle, outside_fence, target_drift_velocity)
 
 AREA = np.array([[-50.0, 950.0, -500.0, 500.0]])
 PERSON, BOAT = CATEGORIES.index("person"), CATEGORIES.index("boat")
@@ -97,11 +97,8 @@ def test_boats_are_not_hidden_by_waves():
     assert ratio_boat == pytest.approx(math.sqrt(0.55)) and ratio_person == pytest.approx(0.55)
 
 
-def test_sampling_and_categories():
-    prob = np.array([[0.5, 0.0, 1.0], [0.2, 0.9, 0.0]])
-    uniform = np.array([[0.4, 0.0, 0.99], [0.3, 0.1, 0.5]])
-    detections = sample_detections(prob, uniform)
-    np.testing.assert_array_equal(detections, [[True, False, True], [False, True, False]])
+def test_detected_categories():
+    detections = np.array([[True, False, True], [False, True, False]])
     category = np.array([[0, 1, 5], [2, 3, 3]])
     found = detected_categories(detections, category)
     np.testing.assert_array_equal(found, [[1, 0, 0, 0, 0, 1], [0, 0, 0, 1, 0, 0]])
@@ -168,9 +165,11 @@ def test_cover_over_a_random_flight():
         assert set(np.unique(coverage)) <= {0.0, 1.0}
         np.testing.assert_array_equal(newly, (coverage - before).sum(axis=(1, 2)))
         on_and_inside = (intensity >= 0.5) & ~outside_fence(drone, area)
-        rows, cols = grid_cell(area, drone[:, 0], drone[:, 1])
-        assert np.all(coverage[np.arange(n), rows, cols][on_and_inside] == 1.0), "the drone's cell is covered"
-    assert coverage.dtype == np.float32 and coverage_ratio(coverage).max() > 0.05
+        rows = np.floor((drone[:, 0] - area[:, 0]) * GRID_SIZE / (area[:, 1] - area[:, 0])).astype(int)
+        cols = np.floor((drone[:, 1] - area[:, 2]) * GRID_SIZE / (area[:, 3] - area[:, 2])).astype(int)
+        covered = coverage[np.arange(n), rows.clip(0, GRID_SIZE - 1), cols.clip(0, GRID_SIZE - 1)]
+        assert np.all(covered[on_and_inside] == 1.0), "the drone's cell is covered"
+    assert coverage.dtype == np.float32 and coverage.mean(axis=(1, 2)).max() > 0.05
 
 
 def test_sensor_off_covers_nothing():
@@ -189,7 +188,7 @@ def test_cover_a_known_footprint():
     expected[9:12, 15:18] = 1.0
     np.testing.assert_array_equal(coverage[0], expected)
     assert newly.tolist() == [9]
-    assert coverage_ratio(coverage).tolist() == [9 / 1024]
+    assert coverage.mean(axis=(1, 2)).tolist() == [9 / 1024]
     # A footprint smaller than a cell still covers the drone's own cell.
     coverage[:] = 0.0
     cover(coverage, AREA, np.array([[north + 10.0, 15.625 + 12.0]]), np.array([2.0]), np.array([1.0]))
@@ -221,12 +220,6 @@ def test_downsample_is_the_2x2_mean_row_major():
     assert out[0, 15 * OBS_GRID] == 0.25 and out.sum() == 0.25
 
 
-def test_grid_cell_is_clipped():
-    area = np.repeat(AREA, 4, axis=0)
-    rows, cols = grid_cell(area, np.array([-50.0, 949.9, 2000.0, -100.0]), np.array([-500.0, 0.0, 600.0, -600.0]))
-    assert rows.tolist() == [0, 31, 31, 0] and cols.tolist() == [0, 16, 31, 0]
-
-
 # ------------------------------------------------------------------------------------ drift and events
 
 
@@ -256,7 +249,6 @@ def test_reached_collision_and_boundary():
     primary = np.array([0, 1, 0, 0, 1])
     np.testing.assert_allclose(distance_to_primary(drone, targets, primary),
                                [math.hypot(10, 10), 15.1, math.hypot(9, 9), 951.0, 501.0])
-    assert target_reached(drone, targets, primary, 15.0).tolist() == [True, False, True, False, False]
     obstacles = np.zeros((5, 2, 3))
     obstacles[0, 0] = (20.0, 0.0, 20.0)  # rim touches the drone: a collision
     obstacles[1, 1] = (100.0, 130.0, 29.0)  # 1 m short
@@ -311,8 +303,8 @@ def test_batch_equals_one_by_one():
             np.testing.assert_array_equal(single_targets[i][0], targets[i, :t])
     assert p.max() > 0.0, "some target was in view at some point"
     np.testing.assert_array_equal(
-        target_reached(drone, targets, batch.primary_index, 15.0),
-        [target_reached(drone[i:i + 1], single_targets[i], s.primary_index, 15.0)[0] for i, s in enumerate(singles)])
+        distance_to_primary(drone, targets, batch.primary_index),
+        [distance_to_primary(drone[i:i + 1], single_targets[i], s.primary_index)[0] for i, s in enumerate(singles)])
     np.testing.assert_array_equal(
         inside_obstacle(drone, batch.obstacles, batch.obstacle_valid),
         [inside_obstacle(drone[i:i + 1], s.obstacles, s.obstacle_valid)[0] for i, s in enumerate(singles)])
@@ -347,7 +339,8 @@ def test_batch_layout_select_and_assign():
 def test_mission_geofence_becomes_the_fence():
     scenario = Scenario()
     fence = SearchArea(-600.0, 600.0, -700.0, 700.0)
-    batch = ScenarioBatch.from_missions([Mission(scenario=scenario), Mission(scenario=scenario, geofence=fence)])
+    missions = [Mission(scenario=scenario), Mission(scenario=scenario, geofence=fence)]
+    batch = ScenarioBatch.from_scenarios([m.scenario for m in missions], [m.fence for m in missions])
     assert batch.fence.tolist() == [[-500.0, 500.0, -500.0, 500.0], [-600.0, 600.0, -700.0, 700.0]]
     drone = np.array([[550.0, 0.0], [550.0, 0.0]])
     assert outside_fence(drone, batch.fence).tolist() == [True, False]
@@ -356,7 +349,7 @@ def test_mission_geofence_becomes_the_fence():
 def test_a_scenario_without_targets_or_obstacles():
     batch = ScenarioBatch.from_scenarios([Scenario(obstacles=(Obstacle(10.0, 10.0, 5.0),)), Scenario()])
     assert not batch.target_valid.any()
-    assert not target_reached(batch.start, batch.targets, batch.primary_index, 100.0).any()
+    assert not (distance_to_primary(batch.start, batch.targets, batch.primary_index) <= 100.0).any()
     assert batch.detection_probability(batch.start, batch.targets, 50.0, 0.0, 1.0).max() == 0.0
     assert inside_obstacle(np.array([[12.0, 12.0], [12.0, 12.0]]), batch.obstacles,
                            batch.obstacle_valid).tolist() == [True, False]

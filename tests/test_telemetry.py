@@ -6,12 +6,12 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from missions.geodesy import GeoPoint, ned_from_geodetic
+from missions.geodesy import GeoPoint, LocalFrame
 from sitl_bridge import telemetry
-from sitl_bridge.dynamics import Wind
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import VehicleConfig
+from sitl_bridge.wind import Wind
 
 
 def received(pilot: LockstepPilot, msg_type: str, since: int = 0) -> list:
@@ -72,7 +72,7 @@ def test_global_and_local_positions_agree_through_the_geodetic_conversion():
     glob = received(pilot, "GLOBAL_POSITION_INT")[-1]
     local = next(m for m in reversed(pilot.received) if m.get_type() == "LOCAL_POSITION_NED"
                  and m.time_boot_ms == glob.time_boot_ms)
-    north, east, down = ned_from_geodetic(home, glob.lat * 1e-7, glob.lon * 1e-7, glob.alt * 1e-3)
+    north, east, down = LocalFrame(home).to_ned(glob.lat * 1e-7, glob.lon * 1e-7, glob.alt * 1e-3)
     assert (north, east, down) == pytest.approx((local.x, local.y, local.z), abs=0.02)  # 1e-7 deg ~ 1 cm
     assert glob.relative_alt * 1e-3 == pytest.approx(-local.z, abs=0.002)
     assert -local.z == pytest.approx(6.0, abs=1.0)

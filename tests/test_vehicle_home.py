@@ -16,7 +16,8 @@ from test_runner import read_tlog, small_mission
 from autonomy.policy import Policy, load_policy
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.mission import Mission
-from missions.mission_file import load_mission, mission_to_dict, save_mission
+from missions.mission_file import load_mission
+from missions.mission_writer import mission_to_dict, save_mission
 from simulation.flight_outcome import FlightWatch, FlyawayLimits
 from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
