@@ -10,7 +10,8 @@ candidates, confirmation rule, endurance) and the same observation builder:
    model, with draws keyed by the mission seed), close looks and their identifications, end conditions;
 2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
 3. act on the observation: movement in [-1, 1] scaled to the mission's speed limit (north/east, or towards and to
-   the right of the observation's target when the artifact was trained so: its ``action_frame``), search
+   the right of the observation's target, slowing on the last step with "arrive", when the artifact was trained so:
+   its ``action_frame``, ``missions.belief_search.movement_velocity``), search
    intensity and camera zoom in [0, 1], the velocity passed through the environment's safety shield (danger zones,
    geofence: ``missions.shield``); during a close look, :attr:`Decision.altitude_m` asks the runner for the
    close-look altitude (the search state's ``altitude_target``), which it flies with vertical velocity.
@@ -34,7 +35,7 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
-from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, target_frame_to_north_east
+from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, movement_velocity
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE, goal_due
 from missions.mission import Mission
 from missions.search import ScenarioBatch
@@ -129,10 +130,11 @@ class SearchPilot:
         if finite:
             self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
         movement = np.clip(action[:2], -1.0, 1.0) if finite else np.array([np.nan] * 2)
-        if finite and self.action_frame == "target":  # as the training environment read it (its action_frame)
-            movement = target_frame_to_north_east(movement[None], state.position,
-                                                  state.target_position(self.policy.hierarchical))[0]
-        movement = movement * self.flight.max_speed_mps
+        if finite:  # as the training environment read it (its action_frame)
+            movement = movement_velocity(movement[None], state.position, state.target_position(self.policy.hierarchical),
+                                         self.action_frame, self.flight.max_speed_mps, self.flight.step_period_s)[0]
+        else:
+            movement = movement * self.flight.max_speed_mps
         if finite:  # the environment's safety filter: danger zones and geofence (missions.shield)
             scen = state.scen
             movement = shield_velocity(state.position, movement[None], scen.obstacles, scen.obstacle_valid,

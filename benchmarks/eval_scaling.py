@@ -29,7 +29,7 @@ from common import results_file, summarise, write_report
 
 from policies.config import TrainConfig
 from policies.evaluation.parallel import evaluate_checkpoint
-from policies.evaluation.parallel import quick_success_rate
+from policies.evaluation.parallel import quick_evaluation
 from policies.training.trainer import Trainer
 from simulation.worker_pool import PoolConfig, run_tasks
 
@@ -39,7 +39,7 @@ MACHINE_NOTE = "2 cores, shared with other jobs (parallel efficiency is bounded 
 def train_checkpoint(folder: str, steps: int) -> str:
     """A short default-preset HRL-SAC run (its networks have the shipped policies' sizes)."""
     config = TrainConfig.from_preset("default", total_steps=steps, seed=0, buffer_size=10_000, eval_every=0)
-    Trainer(config, folder, evaluate=quick_success_rate).run(progress=False)
+    Trainer(config, folder, evaluate=quick_evaluation).run(progress=False)
     return folder
 
 

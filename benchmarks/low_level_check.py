@@ -37,7 +37,7 @@ def fly_goal(policy: CheckpointPolicy, goal: int, split: str, episodes: int) -> 
             core.set_goals(np.full(episodes, goal), decide)
         action = act(core.obs)
         movement = action[:, :2]
-        if config.action_frame == "target":
+        if config.action_frame != "north_east":
             movement = target_frame_to_north_east(movement, core.position, core.goal_point)
         to_goal = core.goal_point - core.position
         far = (np.hypot(*to_goal.T) > config.flight.reach_radius_m) & ~done

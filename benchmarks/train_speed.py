@@ -43,7 +43,7 @@ import torch
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.gym_env import SarSearchEnv
 from policies.env.core import SarSearchConfig
-from policies.evaluation.parallel import quick_success_rate
+from policies.evaluation.parallel import quick_evaluation
 from policies.training.trainer import Trainer
 
 from common import summarise, results_file, write_report
@@ -70,7 +70,7 @@ def our_config(hidden: tuple[int, ...], layer_norm: bool, num_envs: int, updates
 def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, float]:
     """(wall, CPU) steps/s of Trainer.run over ``steps`` steps after ``warmup`` untimed random ones."""
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = Trainer(config, run_dir, evaluate=quick_success_rate)
+        trainer = Trainer(config, run_dir, evaluate=quick_evaluation)
         trainer.run(progress=False, stop_at=warmup)
         clock: dict[str, tuple[float, float]] = {}
         save = trainer.save

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
+from missions.belief_search import check_action_frame
 from missions.mission import FlightSettings
 from missions.validation import Interval, check_fields
 
@@ -66,9 +67,10 @@ class TrainConfig:
     flight: FlightSettings = field(default_factory=FlightSettings)
     """Altitude, speed, decision period, K (subgoal_interval), step limit and reach radius."""
     action_frame: str = "north_east"
-    """How the policy's movement is read (``SarSearchConfig.action_frame``): "north_east" (the paper's) or "target"
-    (SarSearch-v1: towards the observation's target point and to its right; the exported artifact's manifest
-    carries it and the flight pilot reads it the same way)."""
+    """How the policy's movement is read (``SarSearchConfig.action_frame``, ``missions.belief_search.ACTION_FRAMES``):
+    "north_east" (the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to its
+    right) or "arrive" (as "target", slowing on the last step so that the constant action (1, 0) stops on the
+    target); the exported artifact's manifest carries it and the flight pilot reads it the same way."""
 
     # --- low-level / flat SAC
     actor: NetworkConfig = field(default_factory=NetworkConfig)
@@ -247,6 +249,11 @@ class TrainConfig:
     meta-controller of the joint phase), instead of the last one. Model selection on the val split (as
     Stable-Baselines3's EvalCallback keeps its best model), so the test split stays untouched; it needs
     ``eval_every`` > 0, and it judges best with ``eval_episodes`` episodes (use a few hundred)."""
+    meta_keep_best_max_ran_dry: float = 1.0
+    """With ``meta_keep_best``: only evaluations in which at most this share of the sorties ran dry compete on
+    success (while none qualifies, the one with the fewest wins), the rule the scripted searchers are tuned with
+    (``benchmarks/tune_baselines.py``, 0.01). 1 = success alone. Choosing on success alone picks a meta-controller
+    that never sends the drone home: coming home in time can only end a search sooner."""
     log_every: int = 1_000
     """Environment steps between CSV / TensorBoard log rows."""
     torch_threads: int = 1
@@ -280,16 +287,13 @@ class TrainConfig:
                             ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6),
                             ("cross_track_penalty", 0.0, 1e3), ("coverage_bonus", 0.0, 1e3),
                             ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4), ("identify_bonus", 0.0, 1e4),
-                            ("action_margin", 0.0, 1.0)))
+                            ("action_margin", 0.0, 1.0), ("meta_keep_best_max_ran_dry", 0.0, 1.0)))
         if self.meta_returned_reward is not None:  # None: the environment's
             check_fields(self, (("meta_returned_reward", -1e3, 1e3),))
         if self.meta_returned_reward is not None and self.task != "SarSearch-v1":
             raise ValueError(f"TrainConfig.meta_returned_reward applies to SarSearch-v1 only (its return home), got "
                              f"{self.meta_returned_reward!r} on {self.task}; leave it unset (None)")
-        if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"
-                                                                 and self.task != "SarSearch-v1"):
-            raise ValueError(f"TrainConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "
-                             f"{self.action_frame!r} on {self.task}")
+        check_action_frame("TrainConfig", self.action_frame, self.task)
         if self.meta_joint_goals not in ("learned", "random"):
             raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', "
                              f"got {self.meta_joint_goals!r}")

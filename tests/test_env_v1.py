@@ -163,8 +163,47 @@ def test_in_the_target_frame_the_constant_action_flies_straight_at_the_target():
     direction = (goal - start) / np.hypot(*(goal - start))
     assert np.hypot(*travelled) > 150.0  # about full speed once it has accelerated
     assert abs(travelled[0] * direction[1] - travelled[1] * direction[0]) < 1.0  # no sideways drift at all
-    with pytest.raises(ValueError, match="action_frame must be 'north_east', or 'target' on SarSearch-v1"):
+    with pytest.raises(ValueError, match="action_frame must be 'north_east', or on SarSearch-v1 'target' or 'arrive', "
+                                         "got 'target' on SarSearch-v0"):
         SarSearchConfig(task="SarSearch-v0", action_frame="target")
+    with pytest.raises(ValueError, match="TrainConfig.action_frame must be .* got 'towards' on SarSearch-v1"):
+        from policies.config import TrainConfig
+
+        TrainConfig(action_frame="towards")
+
+
+def test_in_the_arrive_frame_the_constant_action_stops_on_the_target_and_holds_there():
+    """(1, 0) read in the arrive frame, flown by the environment's multirotor dynamics, reaches a point 300 m away at
+    full speed, stops on it without passing it by more than a few metres and then holds over it below the close-look
+    speed (what a close look or a landing at home needs). Read in the target frame it keeps overshooting."""
+    from missions.belief_search import CLOSE_LOOK_SPEED_MPS, movement_velocity
+    from sitl_bridge import dynamics
+
+    flight = FlightSettings()
+    airframe = dynamics.MultirotorParams(max_speed_xy_mps=flight.max_speed_mps)
+    target = np.array([[300.0, 40.0]])
+    tracks = {}
+    for frame in ("arrive", "target"):
+        vehicle = dynamics.BatchState.from_states([dynamics.VehicleState(down_m=-50.0, on_ground=False)])
+        track = []
+        for step in range(80):
+            position = np.array([[vehicle.north_m[0], vehicle.east_m[0]]])
+            velocity = movement_velocity(np.array([[1.0, 0.0]]), position, target, frame, flight.max_speed_mps,
+                                         flight.step_period_s)
+            vehicle = dynamics.step_batch(vehicle, velocity[:, 0], velocity[:, 1], 0.0, airframe, dynamics.Wind(),
+                                          float(step), flight.step_period_s)
+            track.append((float(np.hypot(vehicle.north_m[0] - 300.0, vehicle.east_m[0] - 40.0)),
+                          float(np.hypot(vehicle.vn_mps[0], vehicle.ve_mps[0]))))
+        tracks[frame] = np.array(track)
+    distance, speed = tracks["arrive"].T
+    assert speed[5:25].min() > 9.5  # full speed on the way
+    assert distance[40:].max() < 0.5 and speed[40:].max() < CLOSE_LOOK_SPEED_MPS / 10  # on the point, holding
+    passed = distance[np.argmin(distance[:40]):40].max()
+    assert passed < 3.0  # at most a small overshoot
+    assert tracks["target"][40:, 1].max() > 5.0  # the target frame is still swinging through the point
+    velocity = movement_velocity(np.array([[1.0, 0.0], [1.0, 0.0], [0.5, 0.5]]), np.zeros((3, 2)),
+                                 np.array([[30.0, 0.0], [5.0, 0.0], [0.0, 100.0]]), "arrive", 10.0, 1.0)
+    np.testing.assert_allclose(velocity, [[10.0, 0.0], [2.5, 0.0], [-5.0, 5.0]])  # right of east is south
 
 
 def test_meta_returned_reward_is_refused_on_a_task_without_a_return_home():

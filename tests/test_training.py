@@ -19,7 +19,7 @@ from missions.search import footprint_half_width_m
 from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.shaping import cross_track_m
-from policies.evaluation.parallel import evaluate_checkpoint, quick_success_rate
+from policies.evaluation.parallel import evaluate_checkpoint, quick_evaluation
 from policies.training.trainer import Trainer
 
 SMALL = NetworkConfig(hidden=(32, 32))
@@ -382,11 +382,11 @@ def test_the_meta_only_phase_freezes_the_low_level_and_starts_the_meta_buffer_af
 def test_the_meta_only_phase_resumes_exactly(tmp_path):
     config = small_config("hrl-sac", total_steps=1_200, meta_only_steps=600, checkpoint_every=400,
                           meta_keep_best=True, eval_every=200, eval_episodes=4)
-    uninterrupted = Trainer(config, tmp_path / "a", evaluate=quick_success_rate)
+    uninterrupted = Trainer(config, tmp_path / "a", evaluate=quick_evaluation)
     uninterrupted.run(progress=False)
-    killed = Trainer(config, tmp_path / "b", evaluate=quick_success_rate)
+    killed = Trainer(config, tmp_path / "b", evaluate=quick_evaluation)
     killed.run(progress=False, stop_at=800)  # killed inside the phase, after the checkpoint at step 800
-    resumed = Trainer(config, tmp_path / "b", resume=True, evaluate=quick_success_rate)
+    resumed = Trainer(config, tmp_path / "b", resume=True, evaluate=quick_evaluation)
     assert resumed.step == 800 and resumed.low_level_frozen
     resumed.run(progress=False)
     for a, b in zip(uninterrupted.meta.critic.state_dict().values(), resumed.meta.critic.state_dict().values()):
@@ -401,7 +401,7 @@ def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
     plain = Trainer(small_config("hrl-sac", eval_every=0), tmp_path / "plain")
     plain.run(progress=False)
     evaluated = Trainer(small_config("hrl-sac", eval_every=200, eval_episodes=4), tmp_path / "evaluated",
-                        evaluate=quick_success_rate)
+                        evaluate=quick_evaluation)
     evaluated.run(progress=False)
     for a, b in zip(plain.low.actor.state_dict().values(), evaluated.low.actor.state_dict().values()):
         assert torch.equal(a, b)
@@ -411,8 +411,11 @@ def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
         log_rows(tmp_path / "evaluated" / "progress.csv")
     assert [row["eval_success_rate"] for row in rows_plain] == ["nan"] * len(rows_plain)
     evaluations = [row.pop("eval_success_rate") for row in rows_evaluated]
+    ran_dry = [row.pop("eval_ran_dry_rate") for row in rows_evaluated]
     assert evaluations[0] == "nan" and all(0.0 <= float(value) <= 1.0 for value in evaluations[1:])
-    assert [{k: v for k, v in row.items() if k != "eval_success_rate"} for row in rows_plain] == rows_evaluated
+    assert ran_dry[0] == "nan" and all(0.0 <= float(value) <= 1.0 for value in ran_dry[1:])
+    evaluated_fields = ("eval_success_rate", "eval_ran_dry_rate")
+    assert [{k: v for k, v in row.items() if k not in evaluated_fields} for row in rows_plain] == rows_evaluated
     # the last evaluation is the final policy's success on the first 4 val scenarios, as hrlsac evaluate gives it
     final = evaluate_checkpoint(tmp_path / "evaluated", split="val", episodes=4)
     assert float(evaluations[-1]) == final["success_rate"]
@@ -439,6 +442,35 @@ def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp
     policy = CheckpointPolicy.load(tmp_path)  # the run, and its checkpoint, end with step 1,100's
     for actor in (trainer.meta.actor.state_dict(), policy.meta.actor.state_dict()):
         assert all(torch.equal(actor[k], actors[1_100][k]) for k in actor)
+
+
+def test_meta_keep_best_with_a_ran_dry_limit_prefers_the_safe_meta_controller(tmp_path):
+    """With ``meta_keep_best_max_ran_dry`` 0.01, the evaluations whose sorties ran dry more often do not compete on
+    success: step 1,200 (85 %, 10 % ran dry) loses to step 1,400 (80 %, 1 % ran dry); while none qualified, the one
+    that ran dry least was kept (step 1,300 over the phase's first ones)."""
+    config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True,
+                          meta_keep_best_max_ran_dry=0.01, eval_every=100, eval_episodes=4)
+    scripted = {1_200: (0.85, 0.10), 1_300: (0.50, 0.05), 1_400: (0.80, 0.01), 1_500: (0.79, 0.0)}
+    kept = []
+
+    def scripted_evaluation(policy):
+        success, ran_dry = scripted.get(policy.step, (0.9, 0.2))
+        return {"success_rate": success, "ran_dry_rate": ran_dry}
+
+    trainer = Trainer(config, tmp_path, evaluate=scripted_evaluation)
+    original = trainer._better
+
+    def watched(success, ran_dry):
+        better = original(success, ran_dry)
+        kept.append((trainer.step, better))
+        return better
+
+    trainer._better = watched
+    trainer.run(progress=False)
+    assert trainer.best_meta["step"] == 1_400 and trainer.best_meta["ran_dry"] == 0.01
+    assert (1_300, True) in kept and (1_500, False) in kept
+    with pytest.raises(ValueError, match=r"meta_keep_best_max_ran_dry must be a number in \[0, 1\]"):
+        small_config("hrl-sac", meta_keep_best_max_ran_dry=1.5)
 
 
 def test_meta_keep_best_needs_an_evaluation_handed_to_the_trainer(tmp_path):

@@ -48,7 +48,7 @@ def _overrides(items: list[str]) -> dict:
 def main(argv: list[str], prog: str = "hrlsac train") -> int:
     args = build_parser(prog).parse_args(argv)
     from policies.config import TrainConfig
-    from policies.evaluation.parallel import quick_success_rate
+    from policies.evaluation.parallel import quick_evaluation
     from policies.training.sweep_config import build_train_config
     from policies.training.trainer import Trainer
 
@@ -65,7 +65,7 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
                     from None
             if args.steps != config.total_steps and "--steps" in argv:
                 config = dataclasses.replace(config, total_steps=args.steps)
-            trainer = Trainer(config, run_dir, resume=True, evaluate=quick_success_rate)
+            trainer = Trainer(config, run_dir, resume=True, evaluate=quick_evaluation)
         else:
             if (run_dir / CHECKPOINT).exists():
                 raise ValueError(f"{run_dir} already holds a run; continue it with --resume or choose another --out")
@@ -73,7 +73,7 @@ def main(argv: list[str], prog: str = "hrlsac train") -> int:
             if args.num_envs is not None:
                 overrides["num_envs"] = args.num_envs
             config = build_train_config(args.preset, args.algo, args.seed, args.steps, overrides)
-            trainer = Trainer(config, run_dir, evaluate=quick_success_rate)
+            trainer = Trainer(config, run_dir, evaluate=quick_evaluation)
     except (ValueError, TypeError, OSError) as exc:  # OSError: an --out that cannot be created
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2

@@ -35,6 +35,7 @@ import numpy as np
 
 from missions import goals as goal_logic
 from missions import search
+from missions.belief_search import arrival_speed_fraction
 from missions.sweep_width import sweep_width_m
 from missions.validation import check_fields
 
@@ -52,7 +53,7 @@ def fly_straight(position: np.ndarray, goal: np.ndarray, flight, zoom: float | n
     offset = goal - position
     distance = np.hypot(*offset.T)
     step_m = flight.max_speed_mps * flight.step_period_s
-    speed_fraction = np.minimum(1.0, distance / step_m)
+    speed_fraction = arrival_speed_fraction(distance, flight.max_speed_mps, flight.step_period_s, steps=1.0)
     direction = offset / np.maximum(distance, 1e-9)[:, None]
     if turn is not None:
         direction = turn(position, direction, step_m)

@@ -27,7 +27,7 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V3, observe_search
 from missions import search
-from missions.belief_search import TARGET_SLOTS, target_frame_to_north_east
+from missions.belief_search import TARGET_SLOTS, check_action_frame, movement_velocity
 from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
@@ -91,9 +91,10 @@ class SarSearchConfig:
     max_obstacles: int = 4
     """Danger-zone slots per scenario (a scenario with more is refused)."""
     action_frame: str = "north_east"
-    """How the movement components are read: "north_east" (velocity north and east, the paper's) or "target"
-    (SarSearch-v1 only: towards the observation's target point and to the right of that line, so flying straight
-    at the target is the constant action (1, 0); ``missions.belief_search.target_frame_to_north_east``)."""
+    """How the movement components are read (``missions.belief_search.ACTION_FRAMES``): "north_east" (velocity
+    north and east, the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to the
+    right of that line, so flying straight at the target is the constant action (1, 0)) or "arrive" (as "target",
+    slowing on the last step so that (1, 0) also stops on the target)."""
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -104,10 +105,7 @@ class SarSearchConfig:
                      integers=("pool_size", "max_obstacles"))
         if self.max_targets is not None:
             check_fields(self, (("max_targets", 1, 256),), integers=("max_targets",))
-        if self.action_frame not in ("north_east", "target") or (self.action_frame == "target"
-                                                                 and self.task != "SarSearch-v1"):
-            raise ValueError(f"SarSearchConfig.action_frame must be 'north_east', or 'target' on SarSearch-v1, got "
-                             f"{self.action_frame!r} on {self.task}")
+        check_action_frame("SarSearchConfig", self.action_frame, self.task)
 
     @property
     def target_slots(self) -> int:
@@ -230,10 +228,8 @@ class FlownSearch:
         previous = self.position.copy()
         target = self.target_position(self.config.goal_conditioned)
         self._step_start = (previous, target.copy(), np.array(self.searched_cells, dtype=np.float64))
-        movement = a[:, 0:2]
-        if self.config.action_frame == "target":  # SarSearch-v1's option: movement towards / right of the target
-            movement = target_frame_to_north_east(movement, self.position, target)
-        velocity = movement * flight.max_speed_mps
+        velocity = movement_velocity(a[:, 0:2], self.position, target, self.config.action_frame, flight.max_speed_mps,
+                                     flight.step_period_s)
         if self.shielded:  # SarSearch-v1: the safety filter the flight pilot applies too
             velocity = shield_velocity(self.position, velocity, self.scen.obstacles, self.scen.obstacle_valid,
                                        self.scen.fence)

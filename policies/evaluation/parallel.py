@@ -84,13 +84,14 @@ def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None)
     return run_episodes(core, lambda batch: act(batch.obs), choose)
 
 
-def quick_success_rate(policy: CheckpointPolicy) -> float:
-    """The trainer's quick evaluation (``Trainer(evaluate=...)``): the success rate of the deterministic policy on
-    the first ``eval_episodes`` val scenarios, in this process, with its own environments."""
+def quick_evaluation(policy: CheckpointPolicy) -> dict[str, float]:
+    """The trainer's quick evaluation (``Trainer(evaluate=...)``): the success rate and the share of sorties that ran
+    dry of the deterministic policy on the first ``eval_episodes`` val scenarios, in this process, with its own
+    environments."""
     cfg = policy.config
     record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=policy.hierarchical,
                                               task=cfg.task, action_frame=cfg.action_frame))
-    return float(record["success"].mean())
+    return {"success_rate": float(record["success"].mean()), "ran_dry_rate": float(record["ran_dry"].mean())}
 
 
 def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

@@ -57,6 +57,13 @@ TARGET_FRAME_UNITS = (
     "fraction of flight.max_speed_mps to the right of the line to the target (90 degrees clockwise from it)",
 ) + ACTION_UNITS[2:]
 """The action spec of a policy trained with ``action_frame`` "target" (SarSearch-v1)."""
+ARRIVE_FRAME_UNITS = tuple(
+    unit.replace("fraction of flight.max_speed_mps", "fraction of min(flight.max_speed_mps, distance to the target / "
+                 "flight.step_period_s)") for unit in TARGET_FRAME_UNITS[:2]) + ACTION_UNITS[2:]
+"""The action spec of a policy trained with ``action_frame`` "arrive" (SarSearch-v1): as "target", with the speed
+also capped by what covers the rest of the way to the target in one step."""
+FRAME_SPECS = {"north_east": (ACTION_NAMES, ACTION_UNITS), "target": (TARGET_FRAME_NAMES, TARGET_FRAME_UNITS),
+               "arrive": (TARGET_FRAME_NAMES, ARRIVE_FRAME_UNITS)}
 ENTRY_POINTS = {
     "act": f"obs float32 [N, {OBS_DIM}] raw (observation layout) -> actions float32 [N, 4] within action low/high",
     "select_goal": f"obs float32 [N, {META_OBS_DIM}] raw (the first {META_OBS_DIM} values) -> goal indices int64 "
@@ -151,8 +158,7 @@ def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
                    evaluation: dict | str = NOT_EVALUATED) -> PolicyManifest:
     """The manifest of ``policy`` exported in format ``fmt``."""
     config = policy.config
-    names, units = ((TARGET_FRAME_NAMES, TARGET_FRAME_UNITS) if config.action_frame == "target"
-                    else (ACTION_NAMES, ACTION_UNITS))
+    names, units = FRAME_SPECS[config.action_frame]
     return PolicyManifest(
         format_version=FORMAT_VERSION, format=fmt, algorithm=config.algo,
         subgoal_interval=config.flight.subgoal_interval if policy.hierarchical else None,

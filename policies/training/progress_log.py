@@ -17,7 +17,7 @@ import numpy as np
 
 LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
               "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
-              "meta_entropy", "eval_success_rate", "steps_per_s")
+              "meta_entropy", "eval_success_rate", "eval_ran_dry_rate", "steps_per_s")
 WINDOW = 100
 """Finished episodes in the rolling statistics."""
 
@@ -36,7 +36,8 @@ def progress_row(step: int, episodes: int, recent: Sequence[tuple], recent_subgo
             "critic_loss": m.get("critic_loss", math.nan), "actor_loss": m.get("actor_loss", math.nan),
             "alpha": m.get("alpha", math.nan), "meta_critic_loss": m.get("meta_critic_loss", math.nan),
             "meta_alpha": m.get("meta_alpha", math.nan), "meta_entropy": m.get("meta_entropy", math.nan),
-            "eval_success_rate": m.get("eval_success_rate", math.nan), "steps_per_s": steps_per_s}
+            "eval_success_rate": m.get("eval_success_rate", math.nan),
+            "eval_ran_dry_rate": m.get("eval_ran_dry_rate", math.nan), "steps_per_s": steps_per_s}
 
 
 class ProgressLog:

@@ -46,19 +46,19 @@ class RunTask:
 
 def train_run(task: RunTask) -> dict:
     """Train one run folder to its ``total_steps`` (fresh, resumed, or nothing to do). Runs in a Ray worker."""
-    from policies.evaluation.parallel import quick_success_rate
+    from policies.evaluation.parallel import quick_evaluation
     from policies.training.trainer import Trainer
 
     limit_threads()
     spec, folder = task.spec, task.spec.folder
     if (folder / CHECKPOINT).exists():
-        trainer = Trainer(spec.config, folder, resume=True, evaluate=quick_success_rate)
+        trainer = Trainer(spec.config, folder, resume=True, evaluate=quick_evaluation)
         if trainer.step >= spec.config.total_steps:
             return _result(SKIPPED, trainer, "finished before this sweep")
         note = f"resumed at step {trainer.step:,}"
     else:
         _clear_partial_run(folder)
-        trainer = Trainer(spec.config, folder, evaluate=quick_success_rate)
+        trainer = Trainer(spec.config, folder, evaluate=quick_evaluation)
         note = ""
     if task.kill_at_step is not None and trainer.step < task.kill_at_step:
         trainer.run(progress=False, stop_at=task.kill_at_step)

@@ -62,16 +62,16 @@ from policies.training.progress_log import WINDOW, ProgressLog, progress_row, tr
 class Trainer:
     """One training run in ``run_dir``; create with a config (new run) or with ``resume=True``.
 
-    ``evaluate`` measures the policy as it stands every ``eval_every`` steps (a success rate; without it there
-    are no quick evaluations). ``hrlsac train`` and sweeps hand in
-    ``policies.evaluation.parallel.quick_success_rate``: evaluation is given to the trainer, so that training
-    code does not import evaluation code (which reads checkpoints training writes)."""
+    ``evaluate`` measures the policy as it stands every ``eval_every`` steps (a dict with its ``success_rate`` and
+    ``ran_dry_rate``, or a success rate alone; without it there are no quick evaluations). ``hrlsac train`` and
+    sweeps hand in ``policies.evaluation.parallel.quick_evaluation``: evaluation is given to the trainer, so that
+    training code does not import evaluation code (which reads checkpoints training writes)."""
 
     def __init__(self, config: TrainConfig, run_dir: Path | str, resume: bool = False,
-                 evaluate: Callable[[CheckpointPolicy], float] | None = None):
+                 evaluate: Callable[[CheckpointPolicy], dict[str, float] | float] | None = None):
         if config.meta_keep_best and evaluate is None:
             raise ValueError("TrainConfig.meta_keep_best chooses by quick evaluations: give the Trainer an evaluate "
-                             "function (policies.evaluation.parallel.quick_success_rate)")
+                             "function (policies.evaluation.parallel.quick_evaluation)")
         self.run_dir = Path(run_dir)
         self.evaluate = evaluate
         self.config = cfg = config
@@ -110,7 +110,7 @@ class Trainer:
         self.recent: deque = deque(maxlen=WINDOW)  # (success, return, length, coverage) of finished episodes
         self.recent_subgoals: deque = deque(maxlen=10 * WINDOW)  # 1 if a sub-goal point was reached in time
         self.metrics: dict[str, float] = {}
-        self.best_meta: dict | None = None  # meta_keep_best: {"success", "step", "actor"} of the best evaluation
+        self.best_meta: dict | None = None  # meta_keep_best: {"success", "ran_dry", "step", "actor"} of the best
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if resume:
             self._load(self.run_dir / CHECKPOINT)
@@ -279,25 +279,41 @@ class Trainer:
             print(file=sys.stderr)
             if self.best_meta is not None and self.step >= cfg.total_steps:
                 print(f"kept the meta-controller of step {self.best_meta['step']:,} (val success "
-                      f"{self.best_meta['success']:.1%} on {cfg.eval_episodes} episodes)", file=sys.stderr)
+                      f"{self.best_meta['success']:.1%}, ran dry {self.best_meta.get('ran_dry', 0.0):.1%}, on "
+                      f"{cfg.eval_episodes} episodes)", file=sys.stderr)
         log.close()
         return path
 
     def quick_evaluation(self) -> float:
         """Success rate of the deterministic policy as it stands, as measured by the ``evaluate`` function the
-        trainer was given (``quick_success_rate``: the first ``eval_episodes`` val scenarios), logged as
-        ``eval_success_rate``; with ``meta_keep_best``, in the meta-only phase, remembers the meta-controller of
-        the best one. The evaluation must use no random generator of the run, so that training goes on exactly as
-        without it."""
+        trainer was given (``policies.evaluation.parallel.quick_evaluation``: the first ``eval_episodes`` val
+        scenarios), logged as ``eval_success_rate`` (and ``eval_ran_dry_rate``); with ``meta_keep_best``, in the
+        meta-only phase, remembers the meta-controller of the best one (:meth:`_better`). The evaluation must use
+        no random generator of the run, so that training goes on exactly as without it."""
         cfg = self.config
         policy = CheckpointPolicy(cfg, self.normalizer, self.low, self.meta, self.step, self.run_dir)
-        success = float(self.evaluate(policy))
+        result = self.evaluate(policy)
+        scores = result if isinstance(result, dict) else {"success_rate": result}
+        success, ran_dry = float(scores["success_rate"]), float(scores.get("ran_dry_rate", 0.0))
         self.metrics["eval_success_rate"] = success
-        if cfg.meta_keep_best and self.low_level_frozen and (self.best_meta is None
-                                                              or success > self.best_meta["success"]):
+        self.metrics["eval_ran_dry_rate"] = ran_dry if "ran_dry_rate" in scores else math.nan
+        if cfg.meta_keep_best and self.low_level_frozen and self._better(success, ran_dry):
             actor = {key: value.clone() for key, value in self.meta.actor.state_dict().items()}
-            self.best_meta = {"success": success, "step": self.step, "actor": actor}
+            self.best_meta = {"success": success, "ran_dry": ran_dry, "step": self.step, "actor": actor}
         return success
+
+    def _better(self, success: float, ran_dry: float) -> bool:
+        """Whether an evaluation beats the best so far, by the rule the scripted searchers are tuned with: the
+        highest success among those that ran dry in at most ``meta_keep_best_max_ran_dry`` of the episodes, and
+        while none does, the fewest that ran dry (ties: the earlier evaluation stays)."""
+        if self.best_meta is None:
+            return True
+        limit = self.config.meta_keep_best_max_ran_dry
+
+        def score(s: float, r: float) -> tuple[float, float]:
+            return (s, 0.0) if r <= limit else (-1.0, -r)
+
+        return score(success, ran_dry) > score(self.best_meta["success"], self.best_meta.get("ran_dry", 0.0))
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
