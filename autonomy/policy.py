@@ -66,9 +66,11 @@ class Policy:
         return self.manifest.subgoal_interval
 
     def goal_due(self, step: int) -> bool:
-        """Whether the meta-controller decides at this step of a mission (``missions.goals.goal_due``: steps 0, K,
-        2K, ...); never for a flat policy. For loops of your own (docs/export.md); the flight pilot asks the same
-        function."""
+        """Whether the meta-controller decides at this step of a mission by the clock alone
+        (``missions.goals.goal_due``: steps 0, K, 2K, ... since the last decision); never for a flat policy. For
+        loops of your own (docs/export.md). On SarSearch-v1 the flight pilot also decides at once after a decision
+        event (a new candidate, the bingo call), which its search state tells:
+        ``missions.belief_search.BeliefSearchState.goal_due``."""
         return self.hierarchical and bool(goal_due(step, self.manifest.subgoal_interval))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:

@@ -36,7 +36,7 @@ import numpy as np
 from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
 from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, movement_velocity
-from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE, goal_due
+from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
 from missions.search import ScenarioBatch
 from missions.shield import shield_velocity
@@ -113,7 +113,7 @@ class SearchPilot:
             self._segment_reached |= bool(out.goal_reached[0])
             end = self._end_reason(out)
         new_goal = False
-        if end is None and self.policy.hierarchical and goal_due(self.step, self.subgoal_interval):
+        if end is None and self.policy.hierarchical and state.goal_due(self.subgoal_interval)[0]:
             self._close_segment()
             goal = int(self.policy.select_goal(observe_search(state, True)[0, :LAYOUT_V4.meta_dim]))
             state.set_goals(np.array([goal]))

@@ -18,7 +18,7 @@ import torch
 from common import results_file, write_report
 
 from missions.belief_search import target_frame_to_north_east
-from missions.goals import GOAL_NAMES, goal_due
+from missions.goals import GOAL_NAMES
 from policies.checkpoint import CheckpointPolicy
 from policies.evaluation.episodes import END_KEYS, episode_batch
 from policies.evaluation.parallel import padded
@@ -32,7 +32,7 @@ def fly_goal(policy: CheckpointPolicy, goal: int, split: str, episodes: int) -> 
     ended = {key: np.zeros(episodes, dtype=bool) for key in END_KEYS}
     errors, speeds, intensity, zoom = [], [], [], []
     while not done.all():
-        decide = goal_due(core.steps, config.flight.subgoal_interval) & ~done
+        decide = core.goal_due(config.flight.subgoal_interval) & ~done
         if decide.any():
             core.set_goals(np.full(episodes, goal), decide)
         action = act(core.obs)

@@ -21,7 +21,10 @@ look. One step, :meth:`BeliefSearchState.advance`, given the position the drone 
 6. end conditions: the drone within the reach radius of the victim once confirmed (success), a danger zone
    entered, the geofence left, the endurance used up (``ran_dry``), or back over home (hovering, after having left
    it: ``returned``);
-7. a goal whose point was reached is grounded again (``missions.goals.ground_goals_v1``).
+7. a goal whose point was reached is grounded again (``missions.goals.ground_goals_v1``);
+8. the decision events: a step that sighted a new candidate, or after which the drone can only just come home with
+   its landing reserve (the bingo call), asks the meta-controller for a goal before the next step
+   (:meth:`BeliefSearchState.goal_due`), besides the decision every K steps.
 """
 from __future__ import annotations
 
@@ -60,6 +63,10 @@ REACHABLE_MARGIN_M = 10.0
 """A candidate is flown to only while its estimate lies this far inside the area and outside every danger zone."""
 LEFT_HOME_M = 50.0
 """The search has left home once the drone was this far from it; only then does coming back end it."""
+RETURN_RESERVE = 0.1
+"""Share of the endurance a crew keeps for landing: a return home with at least this much left pays
+(``policies.env.ambiguous``), and the step after which the way home would leave less than this is the bingo call,
+a decision event."""
 IDENTIFY_STREAM = np.uint64(0x1D5EED)
 """Mixed into the episode seed for the identification draws: a stream of their own beside the detections'."""
 
@@ -165,10 +172,16 @@ class BeliefSearchState:
         self.has_detection = np.zeros(n, dtype=bool)  # the victim sighted (evaluation only: the logic never reads it)
         self.first_detection_step = np.full(n, -1, dtype=np.int64)
         self.goal, self.goal_point = np.full(n, NO_GOAL, dtype=np.int64), np.zeros((n, 2))
+        self.goal_steps = np.zeros(n, dtype=np.int64)
+        """Steps flown under the current goal (0 at a search's start and at each decision)."""
+        self.decision_event = np.zeros(n, dtype=bool)
+        """The last step sighted a new candidate or made the bingo call (module docstring, step 8); cleared by a
+        decision."""
         self._flat_target = np.zeros((n, 2))
         self._flat_target_due = True  # computed when a flat policy asks for it (HRL-SAC never does)
         self._estimates, self._kind = np.zeros((n, t, 2)), np.zeros((n, t), dtype=np.int64)
         self._identify_chance = np.zeros(n)
+        self._new_candidate = np.zeros(n, dtype=bool)
         self._arange = np.arange(n)
 
     # ------------------------------------------------------------------ episodes and goals
@@ -192,6 +205,8 @@ class BeliefSearchState:
         self.first_detection_step[indices] = -1
         self.goal[indices] = NO_GOAL
         self.goal_point[indices] = scen.datum[indices]
+        self.goal_steps[indices] = 0
+        self.decision_event[indices] = False
         self._refresh_candidates()
 
     def set_goals(self, goals: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
@@ -199,7 +214,20 @@ class BeliefSearchState:
         goals, mask = checked_goals(goals, mask, self.n)
         self.goal[mask] = goals[mask]
         self.goal_point[mask] = self._points(self.goal[mask], mask)
+        self.goal_steps[mask] = 0
+        self.decision_event[mask] = False
         return mask
+
+    def goal_due(self, subgoal_interval: int) -> np.ndarray:
+        """(N,) whether each search's meta-controller chooses a goal before the next step: at the start, K steps
+        after the last decision, and at once after a decision event (``missions.goals.goal_due``)."""
+        return goal_logic.goal_due(self.goal_steps, subgoal_interval, self.decision_event)
+
+    @property
+    def bingo_margin(self) -> np.ndarray:
+        """(N,) share of the endurance that would be left after flying home now at full speed."""
+        home_s = np.hypot(*(self.position - self.scen.start).T) / self.flight.max_speed_mps
+        return self.energy_left - home_s / self.scen.endurance_s
 
     def _points(self, goal: np.ndarray, rows: np.ndarray) -> np.ndarray:
         scen = self.scen
@@ -251,10 +279,12 @@ class BeliefSearchState:
                 dt_s: float) -> BeliefStepOutcome:
         """One decision step: the drones flew to ``position`` (N, 2) with these sensor settings (N,)."""
         flight, scen, rows = self.flight, self.scen, self._arange
+        margin_before = self.bingo_margin
         self.speed_mps = np.hypot(*(position - self.position).T) / dt_s
         self.position[:] = position
         self.time_s += dt_s
         self.steps += 1
+        self.goal_steps += 1
         self.altitude += np.clip(self.altitude_target - self.altitude, -DESCENT_MPS * dt_s, CLIMB_MPS * dt_s)
         search.drift_targets(self.targets, scen.drift_velocity, dt_s)
         belief_logic.drift((self.belief, self.coverage), self.belief_offset, scen.area, scen.forecast_drift, dt_s)
@@ -292,6 +322,8 @@ class BeliefSearchState:
         moved_on = reached & (np.hypot(*(self.goal_point - step_goal_point).T) > flight.reach_radius_m)
         self.altitude_target[:] = np.where(self.close_look(), min(flight.altitude_m, CLOSE_LOOK_ALTITUDE_M),
                                            flight.altitude_m)
+        bingo = (margin_before > RETURN_RESERVE) & (self.bingo_margin <= RETURN_RESERVE)
+        self.decision_event |= self._new_candidate | bingo
         return BeliefStepOutcome(success, collision, out_of_bounds, ran_dry, returned, distance, reached, moved_on,
                                  step_goal_point, removed, self._identify_chance)
 
@@ -300,6 +332,7 @@ class BeliefSearchState:
         scen = self.scen
         unresolved_before = self.status == UNRESOLVED
         new = sighted & ((self.status == NONE) | (self.status == LOST))
+        self._new_candidate = new.any(axis=1)
         if new.any():  # how likely the sighting is the victim, to the crew: its cell's belief against the best one
             cell = belief_logic.cell_size_m(scen.area)[:, None, :]
             water = self.targets - (scen.area[:, 0::2] + self.belief_offset)[:, None, :]

@@ -36,11 +36,14 @@ NO_GOAL = -1
 EXPLORE, SEARCH_LOCATION, TRACK_OBJECT, RETURN_TO_BASE = range(4)
 
 
-def goal_due(steps, subgoal_interval: int):
-    """Whether the meta-controller chooses a goal at a search's step count ``steps`` (an int or an array): at the
-    episode's first step and every K = ``subgoal_interval`` steps after (0, K, 2K, ...). The one statement of
-    the cadence: training, evaluation, the export's parity check and the flight pilot all ask it."""
-    return steps % subgoal_interval == 0
+def goal_due(steps, subgoal_interval: int, event=False):
+    """Whether the meta-controller chooses a goal now, given the steps flown under the current goal ``steps`` (an
+    int or an array; 0 at an episode's start) and whether something happened that calls for a decision ``event``:
+    at the start, every K = ``subgoal_interval`` steps after (0, K, 2K, ...), and at once on an event. The one
+    statement of the cadence: training, evaluation, the export's parity check and the flight pilot all ask it,
+    through the search state's ``goal_due`` (SarSearch-v0 counts the episode's steps and has no events; v1 counts
+    from the last decision and has two, ``missions.belief_search.BeliefSearchState.decision_event``)."""
+    return (steps % subgoal_interval == 0) | event
 
 
 BLOCKS = 8  # ExploreArea works on an 8 x 8 grid of blocks

@@ -121,6 +121,11 @@ class SearchState:
         self.ground(mask)
         return mask
 
+    def goal_due(self, subgoal_interval: int) -> np.ndarray:
+        """(N,) whether each search's meta-controller chooses a goal before the next step: SarSearch-v0's cadence,
+        every K steps of the episode (``missions.goals.goal_due``)."""
+        return goal_logic.goal_due(self.steps, subgoal_interval)
+
     def ground(self, mask: np.ndarray) -> None:
         """Turn the goals of the ``mask`` rows into points from the search state now."""
         scen = self.scen

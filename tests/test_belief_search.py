@@ -206,6 +206,38 @@ def test_the_endurance_runs_out_and_coming_home_ends_the_sortie():
     assert hover(home, (8.0, 0.0), 1)[0].returned[0]
 
 
+def test_decision_events_ask_for_a_goal_at_once_and_a_decision_restarts_the_clock():
+    """A new candidate's sighting and the bingo call (the way home would leave less than the landing reserve) each
+    make a goal due before the next step, whatever the K-step clock says; a decision clears the event and restarts
+    the clock, so the next periodic decision comes K steps after it. A candidate seen again is not new."""
+    state = state_for(decoys=[(200.0, 0.0)], endurance_s=600.0)
+    state.set_goals(np.array([TRACK_OBJECT]))
+    hover(state, (190.0, 0.0), 3, intensity=0.0)  # sensor off: nothing sighted, the clock runs
+    assert state.goal_steps[0] == 3 and not state.goal_due(30)[0]
+    hover_until_sighted(state, (190.0, 0.0), slot=1)
+    assert state.decision_event[0] and state.goal_due(30)[0]
+    state.set_goals(np.array([TRACK_OBJECT]))
+    assert not state.decision_event[0] and state.goal_steps[0] == 0
+    hover(state, (190.0, 0.0), 29)  # the same candidate, sighted again and again: no new event
+    assert not state.goal_due(30)[0]
+    hover(state, (190.0, 0.0), 1)
+    assert state.goal_due(30)[0] and state.goal_steps[0] == 30  # K steps after the last decision
+
+    far = state_for(endurance_s=600.0)  # 500 m from home is 50 s away: bingo once 60 + 50 s are left
+    far.set_goals(np.array([TRACK_OBJECT]))
+    seconds_to_bingo = 600.0 - 0.1 * 600.0 - 500.0 / FLIGHT.max_speed_mps
+    for second in range(1, 600):
+        hover(far, (500.0, 0.0), 1, intensity=0.0)
+        if far.decision_event[0]:
+            break
+        if far.goal_due(30)[0]:
+            far.set_goals(np.array([TRACK_OBJECT]))
+    assert abs(second - seconds_to_bingo) <= 1.0 and far.bingo_margin[0] <= 0.1 < far.bingo_margin[0] + 1.01 / 600
+    far.set_goals(np.array([TRACK_OBJECT]))
+    hover(far, (500.0, 0.0), 5, intensity=0.0)
+    assert not far.decision_event[0]  # called once, not at every step below the reserve
+
+
 # ------------------------------------------------------------------------------------------ flight and training
 
 
@@ -226,11 +258,11 @@ class ScriptedArtifact:
         self.seen.append(np.array(obs))
         offset = obs[..., 2:4]
         speed = min(1.0, float(np.hypot(*offset)) / 0.5)
-        movement = [speed, 0.0] if self.action_frame == "target" else offset / max(float(np.hypot(*offset)), 0.5)
+        movement = [speed, 0.0] if self.action_frame != "north_east" else offset / max(float(np.hypot(*offset)), 0.5)
         return np.concatenate([movement, [1.0, 0.3]]).astype(np.float32)
 
 
-@pytest.mark.parametrize("action_frame", ["north_east", "target"])
+@pytest.mark.parametrize("action_frame", ["north_east", "target", "arrive"])
 def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_frame):
     from autonomy.search_pilot import SearchPilot
     from missions.mission import Mission
@@ -247,7 +279,7 @@ def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_fra
     straight_legs = 0
     for step in range(400):
         decision = pilot.decide(env.position[0].copy())
-        if step % 30 == 0 and env_end is None:
+        if env.goal_due(30)[0] and env_end is None:  # every 30 steps and at decision events, as the pilot
             env.set_goals(np.array([TRACK_OBJECT]))
         np.testing.assert_array_equal(artifact.seen[-1], env.obs[0])  # the same observation, value for value
         if decision.end is not None:

@@ -25,13 +25,12 @@ from __future__ import annotations
 import numpy as np
 
 from autonomy.observation import LAYOUT_V4
-from missions.belief_search import CONFIRMED, BeliefSearchState
+from missions.belief_search import CONFIRMED, RETURN_RESERVE, BeliefSearchState
 from policies.env.core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_TARGET, FlownSearch, SarSearchConfig
 
 REWARD_RAN_DRY = -50.0
 REWARD_RETURNED = 20.0
-RETURN_RESERVE = 0.1
-"""Share of the endurance that must be left on coming home for ``REWARD_RETURNED`` (a landing reserve)."""
+"""For coming home with at least ``missions.belief_search.RETURN_RESERVE`` of the endurance left."""
 
 
 class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):

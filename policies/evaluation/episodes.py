@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from missions.goals import RETURN_TO_BASE, goal_due
+from missions.goals import RETURN_TO_BASE
 from missions.mission import FlightSettings
 from policies.env.core import SarSearchBatch, SarSearchConfig
 from policies.env.tasks import make_batch
@@ -46,7 +46,7 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
     reached = np.zeros(n, dtype=bool)
     while not done.all():
         if choose_goals is not None:
-            decide = goal_due(core.steps, k) & ~done
+            decide = core.goal_due(k) & ~done
             if decide.any():
                 had_goal = decide & (core.steps > 0)
                 segments += had_goal

@@ -15,7 +15,6 @@ import numpy as np
 
 from autonomy.observation import META_OBS_DIM, NO_GOAL
 from autonomy.policy import Policy
-from missions.goals import goal_due
 from policies.checkpoint import CheckpointPolicy
 from policies.env.core import ACTION_HIGH, ACTION_LOW
 from policies.evaluation.episodes import episode_batch
@@ -62,7 +61,7 @@ def record_observations(policy: CheckpointPolicy, count: int = PARITY_OBSERVATIO
     k, next_episode, recorded = policy.config.flight.subgoal_interval, envs, []
     while len(recorded) * envs < count:
         if policy.hierarchical:
-            decide = goal_due(core.steps, k)
+            decide = core.goal_due(k)
             if decide.any():
                 goals = np.zeros(envs, dtype=np.int64)
                 goals[decide] = policy.choose_goals(core.meta_observation[decide])

@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from missions.goals import GOAL_NAMES, goal_due
+from missions.goals import GOAL_NAMES
 from missions.mission_file import load_mission
 from policies.agents.discrete_sac import DiscreteSAC
 from policies.agents.n_step import NStepReturns
@@ -195,7 +195,8 @@ class Trainer:
         if self.hrl:
             self.segment_return += cfg.meta_gamma ** self.segment_steps * meta_learning_reward(cfg, reward, info)
             self.segment_steps += 1
-            finish = goal_due(info["steps"], cfg.flight.subgoal_interval) | done  # done: steps restart at 0
+            # a decision is due before the next step (every K steps, or after a decision event); done: a new episode
+            finish = self.env.core.goal_due(cfg.flight.subgoal_interval) | done
             if finish.any() and self.meta_learns:
                 self.meta_buffer.add(obs=self.segment_obs[finish], action=self.segment_goal[finish],
                                      reward=self.segment_return[finish].astype(np.float32),
