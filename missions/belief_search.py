@@ -22,8 +22,8 @@ look. One step, :meth:`BeliefSearchState.advance`, given the position the drone 
    entered, the geofence left, the endurance used up (``ran_dry``), or back over home (hovering, after having left
    it: ``returned``);
 7. a goal whose point was reached is grounded again (``missions.goals.ground_goals_v1``);
-8. the decision events: a step that sighted a new candidate, or after which the drone can only just come home with
-   its landing reserve (the bingo call), asks the meta-controller for a goal before the next step
+8. the decision events: a step that sighted a new candidate, or after which the drone can only just come home
+   (the bingo call: ``BINGO_RESERVE_S`` to spare), asks the meta-controller for a goal before the next step
    (:meth:`BeliefSearchState.goal_due`), besides the decision every K steps.
 """
 from __future__ import annotations
@@ -65,8 +65,11 @@ LEFT_HOME_M = 50.0
 """The search has left home once the drone was this far from it; only then does coming back end it."""
 RETURN_RESERVE = 0.1
 """Share of the endurance a crew keeps for landing: a return home with at least this much left pays
-(``policies.env.ambiguous``), and the step after which the way home would leave less than this is the bingo call,
-a decision event."""
+(``policies.env.ambiguous``)."""
+BINGO_RESERVE_S = 20.0
+"""The bingo call, a decision event, comes on the step after which the way home at full speed would leave no more
+than this (s): the last decision that can still bring the drone home (the scripted searchers turn home with the
+same reserve, ``policies.env.baselines.TUNED``). Later, the next decision may come too late."""
 IDENTIFY_STREAM = np.uint64(0x1D5EED)
 """Mixed into the episode seed for the identification draws: a stream of their own beside the detections'."""
 
@@ -224,10 +227,10 @@ class BeliefSearchState:
         return goal_logic.goal_due(self.goal_steps, subgoal_interval, self.decision_event)
 
     @property
-    def bingo_margin(self) -> np.ndarray:
-        """(N,) share of the endurance that would be left after flying home now at full speed."""
+    def bingo_margin_s(self) -> np.ndarray:
+        """(N,) seconds of endurance that would be left after flying home now at full speed (inf when unlimited)."""
         home_s = np.hypot(*(self.position - self.scen.start).T) / self.flight.max_speed_mps
-        return self.energy_left - home_s / self.scen.endurance_s
+        return self.scen.endurance_s - self.time_s - home_s
 
     def _points(self, goal: np.ndarray, rows: np.ndarray) -> np.ndarray:
         scen = self.scen
@@ -279,7 +282,7 @@ class BeliefSearchState:
                 dt_s: float) -> BeliefStepOutcome:
         """One decision step: the drones flew to ``position`` (N, 2) with these sensor settings (N,)."""
         flight, scen, rows = self.flight, self.scen, self._arange
-        margin_before = self.bingo_margin
+        margin_before = self.bingo_margin_s
         self.speed_mps = np.hypot(*(position - self.position).T) / dt_s
         self.position[:] = position
         self.time_s += dt_s
@@ -322,7 +325,7 @@ class BeliefSearchState:
         moved_on = reached & (np.hypot(*(self.goal_point - step_goal_point).T) > flight.reach_radius_m)
         self.altitude_target[:] = np.where(self.close_look(), min(flight.altitude_m, CLOSE_LOOK_ALTITUDE_M),
                                            flight.altitude_m)
-        bingo = (margin_before > RETURN_RESERVE) & (self.bingo_margin <= RETURN_RESERVE)
+        bingo = (margin_before > BINGO_RESERVE_S) & (self.bingo_margin_s <= BINGO_RESERVE_S)
         self.decision_event |= self._new_candidate | bingo
         return BeliefStepOutcome(success, collision, out_of_bounds, ran_dry, returned, distance, reached, moved_on,
                                  step_goal_point, removed, self._identify_chance)

@@ -9,6 +9,7 @@ import pytest
 
 from missions import belief
 from missions.belief_search import (
+    BINGO_RESERVE_S,
     CLOSE_LOOK_ALTITUDE_M,
     CONFIRMED,
     DESCENT_MPS,
@@ -223,16 +224,16 @@ def test_decision_events_ask_for_a_goal_at_once_and_a_decision_restarts_the_cloc
     hover(state, (190.0, 0.0), 1)
     assert state.goal_due(30)[0] and state.goal_steps[0] == 30  # K steps after the last decision
 
-    far = state_for(endurance_s=600.0)  # 500 m from home is 50 s away: bingo once 60 + 50 s are left
+    far = state_for(endurance_s=600.0)  # 500 m from home is 50 s away: bingo once 20 + 50 s are left
     far.set_goals(np.array([TRACK_OBJECT]))
-    seconds_to_bingo = 600.0 - 0.1 * 600.0 - 500.0 / FLIGHT.max_speed_mps
+    seconds_to_bingo = 600.0 - BINGO_RESERVE_S - 500.0 / FLIGHT.max_speed_mps
     for second in range(1, 600):
         hover(far, (500.0, 0.0), 1, intensity=0.0)
         if far.decision_event[0]:
             break
         if far.goal_due(30)[0]:
             far.set_goals(np.array([TRACK_OBJECT]))
-    assert abs(second - seconds_to_bingo) <= 1.0 and far.bingo_margin[0] <= 0.1 < far.bingo_margin[0] + 1.01 / 600
+    assert second == seconds_to_bingo and far.bingo_margin_s[0] == BINGO_RESERVE_S
     far.set_goals(np.array([TRACK_OBJECT]))
     hover(far, (500.0, 0.0), 5, intensity=0.0)
     assert not far.decision_event[0]  # called once, not at every step below the reserve
