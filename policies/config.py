@@ -166,6 +166,12 @@ class TrainConfig:
     environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward
     and its success are unchanged: only what the meta-controller learns from. Why: +20 for any return after a
     short excursion makes going home at once the meta-controller's easiest return."""
+    meta_belief_bonus: float = 0.0
+    """SarSearch-v1: the meta-controller's learning reward plus this many times the belief each step's look removed
+    (the chance, under the crew's own model, that the look found the victim; the low level's ``belief_bonus``). The
+    +100 of a success comes in one step out of hundreds and only in some sorties; the belief removed is its expected
+    value as the search goes, so the value of searching on against going home shows in every segment's return
+    instead of only in the rare ones that end in a success. The task and its success are unchanged. 0 = off."""
     meta_only_entropy_scale: float = 0.1
     """Meta entropy target in the meta-only phase = scale * log(4). Lower than ``meta_target_entropy_scale``:
     that high target keeps the goals varied while the low level learns to fly them all, but against a fixed
@@ -287,12 +293,16 @@ class TrainConfig:
                             ("initial_alpha", 1e-6, 100.0), ("intrinsic_scale_m", 1e-3, 1e6),
                             ("cross_track_penalty", 0.0, 1e3), ("coverage_bonus", 0.0, 1e3),
                             ("detection_bonus", 0.0, 1e3), ("belief_bonus", 0.0, 1e4), ("identify_bonus", 0.0, 1e4),
+                            ("meta_belief_bonus", 0.0, 1e4),
                             ("action_margin", 0.0, 1.0), ("meta_keep_best_max_ran_dry", 0.0, 1.0)))
         if self.meta_returned_reward is not None:  # None: the environment's
             check_fields(self, (("meta_returned_reward", -1e3, 1e3),))
         if self.meta_returned_reward is not None and self.task != "SarSearch-v1":
             raise ValueError(f"TrainConfig.meta_returned_reward applies to SarSearch-v1 only (its return home), got "
                              f"{self.meta_returned_reward!r} on {self.task}; leave it unset (None)")
+        if self.meta_belief_bonus and self.task != "SarSearch-v1":
+            raise ValueError(f"TrainConfig.meta_belief_bonus applies to SarSearch-v1 only (its belief), got "
+                             f"{self.meta_belief_bonus!r} on {self.task}; leave it at 0")
         check_action_frame("TrainConfig", self.action_frame, self.task)
         if self.meta_joint_goals not in ("learned", "random"):
             raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', "

@@ -75,7 +75,12 @@ def searched_cells(config: TrainConfig, actions: np.ndarray, info: dict) -> np.n
 
 def meta_learning_reward(config: TrainConfig, reward: np.ndarray, info: dict) -> np.ndarray:
     """(N,) the environment reward the meta-controller learns from: with ``meta_returned_reward`` set, a return home
-    with reserve pays that instead of the environment's ``REWARD_RETURNED`` (SarSearch-v1)."""
-    if config.meta_returned_reward is None or "returned_with_reserve" not in info:
+    with reserve pays that instead of the environment's ``REWARD_RETURNED``, and ``meta_belief_bonus`` times the
+    belief the step's look removed is added (both SarSearch-v1)."""
+    if "returned_with_reserve" not in info:
         return reward
-    return reward + (config.meta_returned_reward - REWARD_RETURNED) * info["returned_with_reserve"]
+    if config.meta_returned_reward is not None:
+        reward = reward + (config.meta_returned_reward - REWARD_RETURNED) * info["returned_with_reserve"]
+    if config.meta_belief_bonus:
+        reward = reward + config.meta_belief_bonus * info["belief_removed"]
+    return reward
