@@ -113,6 +113,25 @@ def test_running_dry_costs_50_and_coming_home_with_reserve_pays_20():
         assert meta_learning_reward(TrainConfig(), np.array([reward]), info).tolist() == [reward]
 
 
+def test_the_meta_belief_bonus_pays_the_belief_each_look_removed_and_nothing_else():
+    from policies.config import TrainConfig
+    from policies.env.shaping import meta_learning_reward
+
+    env = env_for(endurance_s=600.0)
+    env.reset(seed=0)
+    steps = list(fly_to(env, (500.0, 0.0), limit=40))  # out over the datum's area with the sensor on
+    removed = []
+    for reward, _, info in steps:
+        info = {k: np.atleast_1d(v) for k, v in info.items()}
+        learned = meta_learning_reward(TrainConfig(meta_belief_bonus=100.0), np.array([reward]), info)
+        assert learned[0] == pytest.approx(reward + 100.0 * info["belief_removed"][0])
+        assert meta_learning_reward(TrainConfig(), np.array([reward]), info)[0] == reward
+        removed.append(float(info["belief_removed"][0]))
+    assert max(removed) > 0.0 and min(removed) >= 0.0
+    with pytest.raises(ValueError, match="meta_belief_bonus applies to SarSearch-v1 only"):
+        TrainConfig(task="SarSearch-v0", meta_belief_bonus=1.0, low_level_ignores=("coverage",))
+
+
 def test_the_caps_on_targets_and_obstacles_are_configurable():
     many = Scenario(area=AREA, targets=tuple(Target("debris", 10.0 * k, 0.0, primary=k == 0) for k in range(20)),
                     obstacles=tuple(Obstacle(900.0, -400.0 + 50.0 * k, 10.0) for k in range(6)), name="crowded")
