@@ -27,7 +27,7 @@ from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
 from policies.export.module import policy_module
-from policies.export.parity import ACTION_TOLERANCE, Parity, check_parity, record_observations
+from policies.export.parity import ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, Parity, check_parity, record_observations
 from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")
@@ -91,6 +91,24 @@ def test_artifact_acts_like_the_eager_policy_on_recorded_observations(runs, arti
         assert (goals == -1).all()
 
 
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("algo", ALGOS)
+def test_int8_artifact_keeps_goals_and_actions_within_its_stated_tolerance(runs, recorded, tmp_path, algo, fmt):
+    """precision "int8" (the low-level actor's hidden layers): the parity check against INT8_ACTION_TOLERANCE passes
+    (the export writes nothing otherwise), goals are exactly the trained ones, the manifest states both."""
+    result = export_policy(runs[algo], tmp_path / "policy.pt", fmt, check=True, precision="int8")
+    assert result.parity.ok and result.parity.tolerance == INT8_ACTION_TOLERANCE == 0.05
+    artifact, policy = load_policy(result.path), CheckpointPolicy.load(runs[algo])
+    assert (artifact.manifest.precision, artifact.manifest.action_tolerance) == ("int8", INT8_ACTION_TOLERANCE)
+    obs = recorded[algo]
+    difference = np.abs(artifact.act(obs) - policy.act(obs))
+    assert 0.0 < difference.max() <= INT8_ACTION_TOLERANCE  # really int8, and within the stated tolerance
+    expected = policy.choose_goals(obs[:, :META_OBS_DIM]) if algo == "hrl-sac" else -1
+    assert np.array_equal(artifact.select_goal(obs[:, :META_OBS_DIM]), np.broadcast_to(expected, len(obs)))
+    with pytest.raises(ValueError, match="unknown precision 'int4'"):
+        export_policy(runs[algo], tmp_path / "other.pt", fmt, precision="int4")
+
+
 def test_artifact_module_clips_to_the_action_ranges_under_an_action_margin(runs):
     policy = CheckpointPolicy.load(runs["sac"])  # trained with action_margin 0.25: movement [-1.5, 1.5], others
     assert policy.config.action_margin == 0.25   # [-0.25, 1.25], clipped to the environment's ranges
@@ -150,6 +168,9 @@ def test_manifest_round_trips_and_describes_the_checkpoint(runs, artifacts):
         with pytest.raises(ValueError, match=re.escape(message)):
             PolicyManifest.from_json(json.dumps({**broken, "action": {}, "subgoal_interval": "ten"}))
         assert (manifest.format, manifest.algorithm, manifest.format_version) == (fmt, algo, 1)
+        assert (manifest.precision, manifest.action_tolerance) == ("float32", ACTION_TOLERANCE)
+        older = {k: v for k, v in json.loads(manifest.to_json()).items() if k not in ("precision", "action_tolerance")}
+        assert PolicyManifest.from_json(json.dumps(older)) == manifest  # written before the fields: float32
         assert TrainConfig.from_dict(manifest.training_config) == policy.config
         assert manifest.source_checkpoint.trained_steps == policy.step == 400
         assert len(manifest.source_checkpoint.sha256) == 64
