@@ -239,8 +239,11 @@ def summary_lines(manifest: PolicyManifest) -> list[str]:
                  if manifest.hierarchical else "flat (no meta-controller)")
     actions = ", ".join(f"{name} [{low:g}, {high:g}]" for name, low, high
                         in zip(manifest.action.names, manifest.action.low, manifest.action.high))
+    precision = ("" if manifest.precision == "float32" else
+                 f", {manifest.precision} (actions within {manifest.action_tolerance:g} of the trained policy)")
     return [
-        f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}): {hierarchy}",
+        f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}{precision}): "
+        f"{hierarchy}",
         f"  trained: {config.get('preset')} preset, seed {config.get('seed')}, {source.trained_steps:,} steps; "
         f"from {source.file} (sha256 {source.sha256[:16]}...)",
         f"  observation: layout version {manifest.observation.layout_version}, {manifest.observation.dim} values "

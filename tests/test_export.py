@@ -18,7 +18,7 @@ import hrlsac_cli
 from autonomy.observation import META_OBS_DIM, OBS_DIM
 from autonomy.policy import PolicyArtifactError, load_policy
 from autonomy.policy_cli import main as policy_main
-from autonomy.policy_manifest import NOT_EVALUATED, PolicyManifest
+from autonomy.policy_manifest import NOT_EVALUATED, PolicyManifest, summary_lines
 from autonomy.torch_compat import TORCHSCRIPT_DEPRECATION, torchscript_calls
 from missions.goals import GOAL_NAMES, goal_due
 from missions.mission import FlightSettings
@@ -26,8 +26,9 @@ from policies.checkpoint import CheckpointPolicy
 from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
-from policies.export.module import policy_module
-from policies.export.parity import ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, Parity, check_parity, record_observations
+from policies.export.module import PRECISIONS, policy_module
+from policies.export.parity import (ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, TOLERANCES, Parity, check_parity,
+                                    record_observations)
 from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")
@@ -100,11 +101,14 @@ def test_int8_artifact_keeps_goals_and_actions_within_its_stated_tolerance(runs,
     assert result.parity.ok and result.parity.tolerance == INT8_ACTION_TOLERANCE == 0.05
     artifact, policy = load_policy(result.path), CheckpointPolicy.load(runs[algo])
     assert (artifact.manifest.precision, artifact.manifest.action_tolerance) == ("int8", INT8_ACTION_TOLERANCE)
+    assert f"{fmt} (artifact format 1, int8 (actions within 0.05 of the trained policy))" in summary_lines(
+        artifact.manifest)[0]
     obs = recorded[algo]
     difference = np.abs(artifact.act(obs) - policy.act(obs))
     assert 0.0 < difference.max() <= INT8_ACTION_TOLERANCE  # really int8, and within the stated tolerance
     expected = policy.choose_goals(obs[:, :META_OBS_DIM]) if algo == "hrl-sac" else -1
     assert np.array_equal(artifact.select_goal(obs[:, :META_OBS_DIM]), np.broadcast_to(expected, len(obs)))
+    assert tuple(TOLERANCES) == PRECISIONS  # every precision has its tolerance
     with pytest.raises(ValueError, match="unknown precision 'int4'"):
         export_policy(runs[algo], tmp_path / "other.pt", fmt, precision="int4")
 
@@ -221,7 +225,7 @@ def test_refuses_an_artifact_with_another_observation_layout(runs, tmp_path, fmt
 
 def test_a_sarsearch_v0_run_is_not_exported_for_the_runtime_that_flies_v1():
     from policies.config import TrainConfig
-    from policies.export.module import policy_module
+    from policies.export.module import PRECISIONS, policy_module
 
     v0 = CheckpointPolicy.untrained(TrainConfig.from_preset("default", task="SarSearch-v0"))
     with pytest.raises(ValueError, match=r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"):

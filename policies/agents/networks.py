@@ -7,7 +7,7 @@ The algorithms (``policies.agents.sac``, ``policies.agents.discrete_sac``) own t
 The continuous SAC's update evaluates the same layers through :class:`UpdateWeights` (``forward_with``), which
 hands each matrix product its weights in the update's precision: float32 as they are, or bfloat16 copies cast once
 per parameter value. Those are the operations CPU autocast performed (the same kernels on the same dtypes, so the
-same bits, checked by tests/test_sac.py), without autocast's per-call casts of every weight and its dispatch.
+same bits, checked by tests/test_update_precision.py), without autocast's per-call casts of every weight and its dispatch.
 
 Shapes in the paper preset (``TrainConfig.from_preset("paper")``)::
 
@@ -167,7 +167,7 @@ class ActionGradientOnly(torch.autograd.Function):
 
     The actor step needs dQ/da, not dQ/ds: autograd would compute the input gradient of the whole 280- or 292-wide
     first layer and keep 4 columns. Those columns, computed alone, are the same bits in bfloat16 (oneDNN's kernel
-    does not depend on the other columns; checked by tests/test_sac.py against the full gradient), for about a
+    does not depend on the other columns; checked by tests/test_update_precision.py against the full gradient), for about a
     fifth of an input-gradient product per critic. In float32 (MKL) they are not, so float32 keeps the full path.
     Forward: ``F.linear(cat(obs, act).to(bfloat16), W_i, b_i)`` per critic; backward: ``sum_i float(g_i @
     W_i[:, obs_dim:])``, the sum autograd forms where the critics' input gradients meet.
@@ -292,7 +292,8 @@ class TwinQ(nn.Module):
         (:class:`ActionGradientOnly`)."""
         nets = (list(self.q1), list(self.q2))
         if frozen and weights.dtype == torch.bfloat16:
-            first = 1 if isinstance(nets[0][0], InputMask) else 0  # the mask keeps every action input (ones)
+            # Both critics start with the same mask (if any), which keeps every action input (ones).
+            first = 1 if isinstance(nets[0][0], InputMask) else 0
             x_obs = obs if first == 0 else nets[0][0](torch.cat([obs, act], dim=-1))[:, :self.obs_dim]
             layers = [weights(p, frozen=True) for net in nets for p in (net[first].weight, net[first].bias)]
             hidden = ActionGradientOnly.apply(x_obs, act, *layers)

@@ -42,7 +42,7 @@ from missions import goals as goal_logic
 from missions.search import SENSOR_ON_INTENSITY, ZOOM_RANGE
 from policies.checkpoint import CheckpointPolicy, checkpoint_file
 from policies.env.core import ACTION_HIGH, ACTION_LOW, ACTION_NAMES
-from policies.export.module import PolicyModule, policy_module
+from policies.export.module import PRECISIONS, PolicyModule, policy_module
 from policies.export.parity import TOLERANCES, Parity, check_parity, record_observations
 
 ACTION_UNITS = (
@@ -151,8 +151,8 @@ def goal_specs() -> tuple[GoalSpec, ...]:
 def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
                    evaluation: dict | str = NOT_EVALUATED, precision: str = "float32") -> PolicyManifest:
     """The manifest of ``policy`` exported in format ``fmt`` and ``precision``."""
-    if precision not in TOLERANCES:
-        raise ValueError(f"unknown precision {precision!r} (choose {' or '.join(TOLERANCES)})")
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r} (choose {' or '.join(PRECISIONS)})")
     config = policy.config
     names, units = ((TARGET_FRAME_NAMES, TARGET_FRAME_UNITS) if config.action_frame == "target"
                     else (ACTION_NAMES, ACTION_UNITS))
