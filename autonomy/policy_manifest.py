@@ -8,7 +8,8 @@ version, time of export), as JSON inside the artifact (see docs/export.md). The 
 
 ``FORMAT_VERSION`` counts incompatible changes of the artifact (the programs' interface or the manifest's
 fields); a runtime refuses versions it does not know. Adding a manifest field is not such a change: readers
-ignore fields they do not know.
+ignore fields they do not know, and a field added with a default reads as that default from manifests written
+before it (``precision`` and ``action_tolerance``: those artifacts are float32).
 """
 from __future__ import annotations
 
@@ -107,6 +108,12 @@ class PolicyManifest:
     torch_version: str
     created_at: str
     """UTC, ISO 8601."""
+    precision: str = "float32"
+    """The networks' arithmetic: "float32" (as trained) or "int8" (the low-level actor's hidden layers with int8
+    weights and bfloat16 activations; docs/export.md, "Precision")."""
+    action_tolerance: float = 1e-6
+    """Largest |action difference| from the trained policy that the export's parity check accepted (goals are
+    always identical)."""
 
     @property
     def hierarchical(self) -> bool:
@@ -162,6 +169,7 @@ def _anything(value: Any) -> bool:
 # must be refused, not crash the reader).
 _SHAPES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "int": (_is(int), "an integer"),
+    "float": (_is_number, "a number"),
     "str": (_is(str), "a string"),
     "int | None": (lambda value: value is None or _is(int)(value), "an integer or null"),
     "tuple[str, ...]": (_is_list_of(_is(str)), "a list of strings"),
@@ -186,6 +194,8 @@ def _build(cls: type, data: Any, where: str):
         raise ValueError(f"{where} is not a JSON object")
     values = {}
     for field in dataclasses.fields(cls):
+        if field.name not in data and field.default is not dataclasses.MISSING:
+            continue  # added after the first version of the format: older manifests read as the default
         if field.name not in data:
             raise ValueError(f"{where} is missing the field {field.name!r}")
         value = data[field.name]
@@ -229,8 +239,11 @@ def summary_lines(manifest: PolicyManifest) -> list[str]:
                  if manifest.hierarchical else "flat (no meta-controller)")
     actions = ", ".join(f"{name} [{low:g}, {high:g}]" for name, low, high
                         in zip(manifest.action.names, manifest.action.low, manifest.action.high))
+    precision = ("" if manifest.precision == "float32" else
+                 f", {manifest.precision} (actions within {manifest.action_tolerance:g} of the trained policy)")
     return [
-        f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}): {hierarchy}",
+        f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}{precision}): "
+        f"{hierarchy}",
         f"  trained: {config.get('preset')} preset, seed {config.get('seed')}, {source.trained_steps:,} steps; "
         f"from {source.file} (sha256 {source.sha256[:16]}...)",
         f"  observation: layout version {manifest.observation.layout_version}, {manifest.observation.dim} values "

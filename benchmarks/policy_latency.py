@@ -2,11 +2,14 @@
 lower bound of each network, plus artifact sizes.
 
 For each preset (untrained HRL-SAC agents built from ``TrainConfig.from_preset``; or the policy of --checkpoint) the
-same policy runs three ways, each through the call a runner makes (numpy observation in, numpy out):
+same policy runs four ways, each through the call a runner makes (numpy observation in, numpy out):
 
-  * eager:        policies.checkpoint.CheckpointPolicy (numpy normaliser + SAC.act / DiscreteSAC.act)
-  * torchscript:  autonomy.policy.load_policy of the TorchScript artifact
-  * torch-export: autonomy.policy.load_policy of the torch.export artifact (ExportedProgram.module())
+  * eager:            policies.checkpoint.CheckpointPolicy (numpy normaliser + SAC.act / DiscreteSAC.act)
+  * torchscript:      autonomy.policy.load_policy of the TorchScript artifact (float32, the default export)
+  * torch-export:     autonomy.policy.load_policy of the torch.export artifact (ExportedProgram.module())
+  * torchscript-int8: the TorchScript artifact exported with precision "int8" (the low-level actor's hidden layers
+                      with int8 weights and bfloat16 activations; goals exact, actions within the parity tolerance of
+                      docs/export.md, "Precision")
 
 A combined step is select_goal(meta observation) + act(observation), the work of a goal-decision step; act alone is
 every other step. Inputs cycle through observations recorded in the environment. The three take turns in blocks
@@ -40,8 +43,10 @@ from policies.export.parity import record_observations
 
 from common import results_file, write_report
 
-FORMATS = ("torchscript", "torch-export")
-RUNNERS = ("eager",) + FORMATS
+ARTIFACTS = {"torchscript": ("torchscript", "float32"), "torch-export": ("torch-export", "float32"),
+             "torchscript-int8": ("torchscript", "int8")}
+"""Runner name -> (artifact format, precision)."""
+RUNNERS = ("eager",) + tuple(ARTIFACTS)
 CALLS = ("combined", "act", "select_goal")
 TARGET_PRESET, TARGET_P99_US = "paper", 250.0
 
@@ -82,12 +87,13 @@ def percentiles(values: list[float]) -> dict[str, float]:
 def measure(policy: CheckpointPolicy, steps: int, blocks: int, folder: Path) -> dict:
     module = policy_module(policy)
     runners, sizes = {"eager": (policy.choose_goals, policy.act)}, {}
-    for fmt in FORMATS:
-        path = folder / f"policy-{fmt}.pt"
-        path.write_bytes(artifact_bytes(module, build_manifest(policy, fmt, "0" * 64)))
-        sizes[fmt] = path.stat().st_size
+    for name, (fmt, precision) in ARTIFACTS.items():
+        path = folder / f"policy-{name}.pt"
+        manifest = build_manifest(policy, fmt, "0" * 64, precision=precision)
+        path.write_bytes(artifact_bytes(policy_module(policy, precision), manifest))
+        sizes[name] = path.stat().st_size
         runtime = load_policy(path)
-        runners[fmt] = (runtime.select_goal, runtime.act)
+        runners[name] = (runtime.select_goal, runtime.act)
     obs = record_observations(policy, count=500, envs=50)
     inputs = [(row[None, :], row[None, :META_OBS_DIM]) for row in obs]
     samples = {(r, c, kind): [] for r in RUNNERS for c in CALLS for kind in ("wall", "cpu")}
@@ -137,9 +143,9 @@ def main() -> int:
             report["presets"][name] = result
             print(f"\n{name}: actor {result['actor_layers']}, meta {result['meta_layers']}; artifacts "
                   + ", ".join(f"{fmt} {size / 1e6:.2f} MB" for fmt, size in result["artifact_bytes"].items()))
-            print(f"  {'call':12s} {'lower bound':>12s}" + "".join(f" {r + ' p50/p99':>24s}" for r in RUNNERS))
+            print(f"  {'call':12s} {'lower bound':>12s}" + "".join(f" {r + ' p50/p99':>25s}" for r in RUNNERS))
             for call in CALLS:
-                cells = "".join(f" {result['latency_us'][r][call]['wall']['p50']:11.1f}/"
+                cells = "".join(f" {result['latency_us'][r][call]['wall']['p50']:12.1f}/"
                                 f"{result['latency_us'][r][call]['wall']['p99']:<12.1f}" for r in RUNNERS)
                 print(f"  {call:12s} {bound[call]:9.1f} us{cells}")
             if name == TARGET_PRESET:

@@ -18,7 +18,7 @@ import hrlsac_cli
 from autonomy.observation import META_OBS_DIM, OBS_DIM
 from autonomy.policy import PolicyArtifactError, load_policy
 from autonomy.policy_cli import main as policy_main
-from autonomy.policy_manifest import NOT_EVALUATED, PolicyManifest
+from autonomy.policy_manifest import NOT_EVALUATED, PolicyManifest, summary_lines
 from autonomy.torch_compat import TORCHSCRIPT_DEPRECATION, torchscript_calls
 from missions.goals import GOAL_NAMES, goal_due
 from missions.mission import FlightSettings
@@ -26,8 +26,9 @@ from policies.checkpoint import CheckpointPolicy
 from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
-from policies.export.module import policy_module
-from policies.export.parity import ACTION_TOLERANCE, Parity, check_parity, record_observations
+from policies.export.module import PRECISIONS, policy_module
+from policies.export.parity import (ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, TOLERANCES, Parity, check_parity,
+                                    record_observations)
 from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")
@@ -91,6 +92,27 @@ def test_artifact_acts_like_the_eager_policy_on_recorded_observations(runs, arti
         assert (goals == -1).all()
 
 
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("algo", ALGOS)
+def test_int8_artifact_keeps_goals_and_actions_within_its_stated_tolerance(runs, recorded, tmp_path, algo, fmt):
+    """precision "int8" (the low-level actor's hidden layers): the parity check against INT8_ACTION_TOLERANCE passes
+    (the export writes nothing otherwise), goals are exactly the trained ones, the manifest states both."""
+    result = export_policy(runs[algo], tmp_path / "policy.pt", fmt, check=True, precision="int8")
+    assert result.parity.ok and result.parity.tolerance == INT8_ACTION_TOLERANCE == 0.05
+    artifact, policy = load_policy(result.path), CheckpointPolicy.load(runs[algo])
+    assert (artifact.manifest.precision, artifact.manifest.action_tolerance) == ("int8", INT8_ACTION_TOLERANCE)
+    assert f"{fmt} (artifact format 1, int8 (actions within 0.05 of the trained policy))" in summary_lines(
+        artifact.manifest)[0]
+    obs = recorded[algo]
+    difference = np.abs(artifact.act(obs) - policy.act(obs))
+    assert 0.0 < difference.max() <= INT8_ACTION_TOLERANCE  # really int8, and within the stated tolerance
+    expected = policy.choose_goals(obs[:, :META_OBS_DIM]) if algo == "hrl-sac" else -1
+    assert np.array_equal(artifact.select_goal(obs[:, :META_OBS_DIM]), np.broadcast_to(expected, len(obs)))
+    assert tuple(TOLERANCES) == PRECISIONS  # every precision has its tolerance
+    with pytest.raises(ValueError, match="unknown precision 'int4'"):
+        export_policy(runs[algo], tmp_path / "other.pt", fmt, precision="int4")
+
+
 def test_artifact_module_clips_to_the_action_ranges_under_an_action_margin(runs):
     policy = CheckpointPolicy.load(runs["sac"])  # trained with action_margin 0.25: movement [-1.5, 1.5], others
     assert policy.config.action_margin == 0.25   # [-0.25, 1.25], clipped to the environment's ranges
@@ -150,6 +172,9 @@ def test_manifest_round_trips_and_describes_the_checkpoint(runs, artifacts):
         with pytest.raises(ValueError, match=re.escape(message)):
             PolicyManifest.from_json(json.dumps({**broken, "action": {}, "subgoal_interval": "ten"}))
         assert (manifest.format, manifest.algorithm, manifest.format_version) == (fmt, algo, 1)
+        assert (manifest.precision, manifest.action_tolerance) == ("float32", ACTION_TOLERANCE)
+        older = {k: v for k, v in json.loads(manifest.to_json()).items() if k not in ("precision", "action_tolerance")}
+        assert PolicyManifest.from_json(json.dumps(older)) == manifest  # written before the fields: float32
         assert TrainConfig.from_dict(manifest.training_config) == policy.config
         assert manifest.source_checkpoint.trained_steps == policy.step == 400
         assert len(manifest.source_checkpoint.sha256) == 64
@@ -200,7 +225,7 @@ def test_refuses_an_artifact_with_another_observation_layout(runs, tmp_path, fmt
 
 def test_a_sarsearch_v0_run_is_not_exported_for_the_runtime_that_flies_v1():
     from policies.config import TrainConfig
-    from policies.export.module import policy_module
+    from policies.export.module import PRECISIONS, policy_module
 
     v0 = CheckpointPolicy.untrained(TrainConfig.from_preset("default", task="SarSearch-v0"))
     with pytest.raises(ValueError, match=r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"):

@@ -224,13 +224,13 @@ def test_action_margin_widens_the_policy_range_and_clips_to_the_environment():
 def test_critics_judge_the_flown_action_under_an_action_margin(monkeypatch):
     agent = SAC(3, 2, LOW2, HIGH2, small_config(action_margin=0.25))  # second dimension [0, 1] -> [-0.25, 1.25]
     seen = []
-    for critic in (agent.critic, agent.critic_target):
-        forward = critic.forward
-        monkeypatch.setattr(critic, "forward", lambda obs, action, forward=forward: (seen.append(action.detach()),
-                                                                                     forward(obs, action))[1])
+    for critic in (agent.critic, agent.critic_target):  # the update's passes (forward_with)
+        forward = critic.forward_with
+        monkeypatch.setattr(critic, "forward_with", lambda obs, action, *args, forward=forward, **kwargs: (
+            seen.append(action.detach()), forward(obs, action, *args, **kwargs))[1])
     sampled = torch.tensor([[0.9, -0.95], [0.3, 0.5]])
 
-    def fake_sample(obs, generator=None):
+    def fake_sample(obs, generator=None, weights=None):
         mean, log_std = agent.actor(obs)
         return sampled + 0.0 * mean, 0.0 * log_std.sum(-1)
 
@@ -253,7 +253,7 @@ def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
     constant_output(agent.critic.q1, 0.25)
     constant_output(agent.critic.q2, -0.75)
 
-    def fake_sample(obs, generator=None):  # log pi(a|s) = obs[:, 0]; still differentiable for the actor step
+    def fake_sample(obs, generator=None, weights=None):  # log pi(a|s) = obs[:, 0]; differentiable for the actor step
         mean, log_std = agent.actor(obs)
         return torch.tanh(mean) * 0.0, obs[:, 0] + 0.0 * log_std.sum(-1)
 

@@ -21,6 +21,9 @@ Conventions:
 - Dropout (paper preset) is active for the online networks during updates; ``act`` always runs the actor in
   eval mode (dropout is a regulariser, exploration comes from the Gaussian), and the target critics are
   permanently in eval mode (their job is a low-variance bootstrap target).
+- Precision (``TrainConfig.update_dtype``): the update's passes run through ``forward_with`` and one
+  :class:`policies.agents.networks.UpdateWeights`, which holds the bfloat16 casts of the weights between their
+  changes (the same arithmetic as CPU autocast, bit for bit, minus its per-call casts); acting is float32.
 """
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ from policies.agents.networks import (
     PrivateTorchRNG,
     SquashedGaussianActor,
     TwinQ,
+    UpdateWeights,
     as_float_tensor,
     derive_seeds,
     polyak_update,
@@ -89,6 +93,9 @@ class SAC(CheckpointedAgent):
         self.num_updates = 0
         self._critic_params = list(self.critic.parameters())
         self._target_params = list(self.critic_target.parameters())
+        self._actor_params = list(self.actor.parameters())
+        self._params = self._actor_params + self._critic_params + self._target_params
+        self._weights = UpdateWeights(torch.bfloat16 if config.update_dtype == "bfloat16" else torch.float32)
         # Without Dropout the train / eval mode changes nothing (LayerNorm, ReLU and Linear ignore it) and the
         # global torch RNG is never drawn from, so the per-call mode switches and RNG swaps can be skipped.
         self._actor_has_dropout = any(isinstance(m, torch.nn.Dropout) for m in self.actor.modules())
@@ -114,13 +121,13 @@ class SAC(CheckpointedAgent):
         if obs_t.dim() != 2 or obs_t.shape[1] != self.obs_dim:
             raise ValueError(f"obs must have shape (B, {self.obs_dim}) or ({self.obs_dim},), got {tuple(obs_t.shape)}")
         if not self._actor_has_dropout:
-            unit = self.actor.deterministic(obs_t) if deterministic else self.actor.sample(obs_t, self.generator)[0]
+            unit = self.actor.deterministic(obs_t) if deterministic else self.actor.sample_action(obs_t, self.generator)
         else:
             was_training = self.actor.training
             self.actor.eval()
             try:
                 unit = (self.actor.deterministic(obs_t) if deterministic
-                        else self.actor.sample(obs_t, self.generator)[0])
+                        else self.actor.sample_action(obs_t, self.generator))
             finally:
                 self.actor.train(was_training)
         action = self.scaler.to_env(unit).numpy()
@@ -131,8 +138,9 @@ class SAC(CheckpointedAgent):
     def soft_q_target(self, reward: torch.Tensor, next_obs: torch.Tensor, done: torch.Tensor,
                       discount: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
         """y = r + discount (1 - done) (min_j Q'_j(s', a') - alpha log pi(a'|s')), a' ~ pi(.|s'); shape (B,)."""
-        next_action, next_log_prob = self.actor.sample(next_obs, self.generator)
-        q1_next, q2_next = self.critic_target(next_obs, self.scaler.flown(next_action))
+        next_action, next_log_prob = self.actor.sample(next_obs, self.generator, self._weights)
+        # (without grad here, so nothing reaches the target critics' parameters without freezing them)
+        q1_next, q2_next = self.critic_target.forward_with(next_obs, self.scaler.flown(next_action), self._weights)
         soft_value = torch.min(q1_next, q2_next) - alpha * next_log_prob
         return reward + discount * (1.0 - done) * soft_value
 
@@ -159,37 +167,19 @@ class SAC(CheckpointedAgent):
             alpha = self.log_alpha.detach().exp()
 
             # --- critics: regress both Q-networks on the soft Bellman target.
-            with self._precision():  # forward passes only: backward follows the dtypes they chose
-                y = self.soft_q_target(reward, next_obs, done, discount, alpha)
-                q1, q2 = self.critic(obs, action)
-            critic_loss = (w * ((q1 - y).square() + (q2 - y).square())).mean()
-            self.critic_optim.zero_grad(set_to_none=True)
-            critic_loss.backward()
-            self.critic_optim.step()
+            y = self.soft_q_target(reward, next_obs, done, discount, alpha)
+            q1, q2 = self.critic.forward_with(obs, action, self._weights)
+            critic_loss = self._critic_step(q1, q2, y, w)
 
             # --- actor: maximise min_j Q_j(s, a~) + alpha H through the reparameterised sample, against the
             # critics just updated. Their parameters are frozen for this pass so that backward skips their
             # weight gradients (about a third of the actor step's cost) -- the gradient still flows to a~.
-            with self._precision():
-                new_action, log_prob = self.actor.sample(obs, self.generator)
-                self._set_critic_requires_grad(False)
-                q1_pi, q2_pi = self.critic(obs, self.scaler.flown(new_action))
-                self._set_critic_requires_grad(True)
-            actor_loss = (alpha * log_prob - torch.min(q1_pi, q2_pi)).mean()
-
-            # --- temperature: d loss / d log_alpha = E[-log pi] - target = H - target, so alpha grows when the
-            # entropy is below the target and shrinks when it is above.
-            alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
-
-            # One backward pass for both: the two losses share no parameter (the actor loss sees alpha detached,
-            # the alpha loss sees log pi detached), so each gets exactly the gradient of its own loss, bit for bit.
-            self.actor_optim.zero_grad(set_to_none=True)
-            self.alpha_optim.zero_grad(set_to_none=True)
-            (actor_loss + alpha_loss).backward()
-            self.actor_optim.step()
-            self.alpha_optim.step()
+            new_action, log_prob = self.actor.sample(obs, self.generator, self._weights)
+            q1_pi, q2_pi = self.critic.forward_with(obs, self.scaler.flown(new_action), self._weights, frozen=True)
+            actor_loss, alpha_loss = self._actor_step(alpha, log_prob, q1_pi, q2_pi)
 
         polyak_update(self._critic_params, self._target_params, self.tau)
+        self._weights.forget_casts(self._target_params)
         self.num_updates += 1
 
         with torch.no_grad():
@@ -198,16 +188,35 @@ class SAC(CheckpointedAgent):
                                   -log_prob.detach().mean(), 0.5 * (q1.detach().mean() + q2.detach().mean())])
         return td_errors.numpy(), dict(zip(METRIC_NAMES, values.tolist()))  # one conversion for all metrics
 
-    def _precision(self):
-        """The update's matrix-product precision (TrainConfig.update_dtype): bfloat16 autocast, or nothing."""
-        if self.config.update_dtype == "bfloat16":
-            return torch.autocast("cpu", dtype=torch.bfloat16)
-        return contextlib.nullcontext()
+    def _critic_step(self, q1: torch.Tensor, q2: torch.Tensor, y: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+        """The critics' loss (PER-weighted squared errors of both against y) and their optimiser step."""
+        critic_loss = (w * ((q1 - y).square() + (q2 - y).square())).mean()
+        self.critic_optim.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optim.step()
+        self._weights.forget_casts(self._critic_params)
+        return critic_loss
 
-    def _set_critic_requires_grad(self, flag: bool) -> None:
-        # What critic.requires_grad_(flag) does, over the cached parameter list (no module-tree walk per call).
-        for param in self._critic_params:
-            param.requires_grad_(flag)
+    def _actor_step(self, alpha: torch.Tensor, log_prob: torch.Tensor, q1_pi: torch.Tensor, q2_pi: torch.Tensor
+                    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The actor's and the temperature's losses and optimiser steps; returns (actor_loss, alpha_loss)."""
+        actor_loss = (alpha * log_prob - torch.min(q1_pi, q2_pi)).mean()
+        # temperature: d loss / d log_alpha = E[-log pi] - target = H - target, so alpha grows when the entropy is
+        # below the target and shrinks when it is above.
+        alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
+        # One backward pass for both: the two losses share no parameter (the actor loss sees alpha detached, the
+        # alpha loss sees log pi detached), so each gets exactly the gradient of its own loss, bit for bit.
+        self.actor_optim.zero_grad(set_to_none=True)
+        self.alpha_optim.zero_grad(set_to_none=True)
+        (actor_loss + alpha_loss).backward()
+        self.actor_optim.step()
+        self.alpha_optim.step()
+        self._weights.forget_casts(self._actor_params)
+        return actor_loss, alpha_loss
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        self._weights.forget(self._params)  # new values: nothing kept of the old ones may survive
 
     def _tensors(self, batch: dict[str, np.ndarray], weights: np.ndarray | None):
         obs = torch.as_tensor(np.asarray(batch["obs"], dtype=np.float32))

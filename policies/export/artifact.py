@@ -42,8 +42,8 @@ from missions import goals as goal_logic
 from missions.search import SENSOR_ON_INTENSITY, ZOOM_RANGE
 from policies.checkpoint import CheckpointPolicy, checkpoint_file
 from policies.env.core import ACTION_HIGH, ACTION_LOW, ACTION_NAMES
-from policies.export.module import PolicyModule, policy_module
-from policies.export.parity import Parity, check_parity, record_observations
+from policies.export.module import PRECISIONS, PolicyModule, policy_module
+from policies.export.parity import TOLERANCES, Parity, check_parity, record_observations
 
 ACTION_UNITS = (
     "fraction of flight.max_speed_mps: velocity north (m/s) = value * max_speed_mps",
@@ -88,15 +88,16 @@ class ExportResult:
 
 
 def export_policy(checkpoint: Path | str, out: Path | str, fmt: str = "torchscript",
-                  check: bool = False) -> ExportResult:
-    """Write the artifact of a checkpoint (file or run folder) to ``out``; ``check``: parity check first."""
+                  check: bool = False, precision: str = "float32") -> ExportResult:
+    """Write the artifact of a checkpoint (file or run folder) to ``out``; ``check``: parity check first;
+    ``precision``: "float32" (as trained) or "int8" (``policies.export.module``; docs/export.md, "Precision")."""
     out = Path(out)
     if out.is_dir() or not out.parent.is_dir():
         raise ValueError(f"{out}: the artifact must be a file in an existing folder")
     policy, sha256 = read_checkpoint(checkpoint)
     evaluation, notes = evaluation_metrics(policy)
-    manifest = build_manifest(policy, fmt, sha256, evaluation)
-    data = artifact_bytes(policy_module(policy), manifest)
+    manifest = build_manifest(policy, fmt, sha256, evaluation, precision)
+    data = artifact_bytes(policy_module(policy, precision), manifest)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     parity = None
     try:
@@ -155,8 +156,10 @@ def goal_specs() -> tuple[GoalSpec, ...]:
 
 
 def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
-                   evaluation: dict | str = NOT_EVALUATED) -> PolicyManifest:
-    """The manifest of ``policy`` exported in format ``fmt``."""
+                   evaluation: dict | str = NOT_EVALUATED, precision: str = "float32") -> PolicyManifest:
+    """The manifest of ``policy`` exported in format ``fmt`` and ``precision``."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r} (choose {' or '.join(PRECISIONS)})")
     config = policy.config
     names, units = FRAME_SPECS[config.action_frame]
     return PolicyManifest(
@@ -168,7 +171,8 @@ def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
         # Through JSON once, so that the manifest in memory equals the one read back (lists, not tuples).
         entry_points=ENTRY_POINTS, training_config=json.loads(json.dumps(config.to_dict())), evaluation=evaluation,
         source_checkpoint=SourceCheckpoint(policy.path.name, checkpoint_sha256, policy.step),
-        torch_version=torch.__version__, created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        torch_version=torch.__version__, created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        precision=precision, action_tolerance=TOLERANCES[precision])
 
 
 def artifact_bytes(module: PolicyModule, manifest: PolicyManifest) -> bytes:

@@ -7,8 +7,14 @@ it cannot be switched back on by a ``.train()``), ``tanh`` squashing and the aff
 The operations are the eager ones in the same order, which is what makes the export agree with the eager
 policy to float32 rounding (tests/test_export.py).
 
-    PolicyModule.act(obs: Tensor[N, 288]) -> Tensor[N, 4]          ActionHead
+    PolicyModule.act(obs: Tensor[N, 288]) -> Tensor[N, 4]          ActionHead (or Int8ActionHead)
     PolicyModule.select_goal(obs: Tensor[N, 284]) -> Tensor[N]     GoalHead (HRL-SAC) or NoGoal (flat SAC: -1)
+
+Precision (``PRECISIONS``): "float32" is the policy as trained, operation for operation. "int8" is an opt-in for
+the latency of a large low-level actor at batch 1 (docs/export.md, "Precision"): its hidden Linear layers keep
+their weights as int8 with one float scale per output (``Int8Linear``, a quarter of the float32 bytes) and run on
+bfloat16 activations; the action head and the normalisation run in float32 and the meta-controller stays as
+trained, so goals are the trained ones exactly and actions agree to ``policies.export.parity.TOLERANCES["int8"]``.
 """
 from __future__ import annotations
 
@@ -21,6 +27,9 @@ from autonomy.observation import META_OBS_DIM, NO_GOAL, OBS_DIM, OBSERVATION_LAY
 from policies.checkpoint import CheckpointPolicy
 from policies.agents.networks import ActionScaler, CategoricalActor, SquashedGaussianActor
 from policies.agents.normalizer import RunningMeanStd
+
+
+PRECISIONS = ("float32", "int8")
 
 
 def check_batch(x: Tensor, width: int) -> None:
@@ -50,6 +59,23 @@ class FrozenNormalizer(nn.Module):
         return standardised.clamp(-self.clip, self.clip).to(torch.float32)
 
 
+class Float32Normalizer(nn.Module):
+    """:class:`FrozenNormalizer` in float32, as ``(x - mean) * (1 / std)``: for the int8 head, whose activations are
+    bfloat16 anyway, two operations fewer per call than the float64 path (the rounding differs in the last float32
+    bits, far inside the int8 tolerance)."""
+
+    def __init__(self, normalizer: RunningMeanStd, width: int):
+        super().__init__()
+        self.width = int(width)
+        self.clip = float(normalizer.clip)
+        self.register_buffer("mean", torch.from_numpy(normalizer.mean[:width].astype("float32")))
+        self.register_buffer("inverse_std", torch.from_numpy((1.0 / normalizer.std()[:width]).astype("float32")))
+
+    def forward(self, x: Tensor) -> Tensor:
+        check_batch(x, self.width)
+        return ((x - self.mean) * self.inverse_std).clamp(-self.clip, self.clip)
+
+
 class ActionHead(nn.Module):
     """Raw observations (N, 288) -> deterministic actions (N, 4) in the environment's action ranges."""
 
@@ -65,7 +91,53 @@ class ActionHead(nn.Module):
 
     def forward(self, obs: Tensor) -> Tensor:
         unit = torch.tanh(self.mean(self.trunk(self.normalize(obs))))  # SquashedGaussianActor.deterministic
-        return torch.clamp(self.policy_low + (unit + 1.0) * self.half_range, self.low, self.high)  # ActionScaler.to_env
+        return self.to_action_range(unit)
+
+    def to_action_range(self, unit: Tensor) -> Tensor:
+        """``ActionScaler.to_env``: the unit box onto the (margin-widened) action box, clipped to the actions'."""
+        return torch.clamp(self.policy_low + (unit + 1.0) * self.half_range, self.low, self.high)
+
+
+class Int8Linear(nn.Module):
+    """A Linear layer whose weight is int8 with one scale per output row (symmetric, round to nearest), applied to
+    bfloat16 inputs by ``torch._weight_int8pack_mm`` (the weight-only int8 kernel made for small batches).
+
+    At batch 1 a policy step reads every weight once, so its time follows the weights' bytes: a quarter of
+    float32's. The rounding error of a weight is at most half its row's scale (max |w| / 254).
+    """
+
+    def __init__(self, linear: nn.Linear):
+        super().__init__()
+        weight = linear.weight.detach().float()
+        scale = weight.abs().amax(dim=1).clamp_min(torch.finfo(torch.float32).tiny) / 127.0
+        self.register_buffer("weight", torch.round(weight / scale[:, None]).clamp(-127, 127).to(torch.int8))
+        self.register_buffer("scale", scale.to(torch.bfloat16))
+        self.register_buffer("bias", linear.bias.detach().to(torch.bfloat16))
+
+    def forward(self, x: Tensor) -> Tensor:
+        return torch._weight_int8pack_mm(x, self.weight, self.scale) + self.bias
+
+
+def int8_layers(layers: nn.Sequential) -> nn.Sequential:
+    """``layers`` (already without Dropout) with every Linear as an :class:`Int8Linear`; LayerNorm and ReLU as they
+    are (LayerNorm takes the bfloat16 activations with its float32 weights)."""
+    return nn.Sequential(*(Int8Linear(m) if isinstance(m, nn.Linear) else m for m in layers))
+
+
+class Int8ActionHead(ActionHead):
+    """:class:`ActionHead` with its hidden layers in int8 weights and bfloat16 activations (precision "int8"); the
+    normalisation (:class:`Float32Normalizer`), the mean head and the map to the action ranges are float32."""
+
+    def __init__(self, normalizer: RunningMeanStd, actor: SquashedGaussianActor, scaler: ActionScaler):
+        super().__init__(normalizer, actor, scaler)
+        self.normalize = Float32Normalizer(normalizer, actor.obs_dim)
+        self.trunk = int8_layers(self.trunk)
+        # to_action_range as one multiply-add: low' + (u + 1) * half = (low' + half) + u * half
+        self.register_buffer("unit_zero", self.policy_low + self.half_range)
+
+    def forward(self, obs: Tensor) -> Tensor:
+        unit = torch.tanh(self.mean(self.trunk(self.normalize(obs).to(torch.bfloat16)).float()))
+        return torch.clamp(torch.addcmul(self.unit_zero, unit, self.half_range), self.low, self.high)
 
 
 class GoalHead(nn.Module):
@@ -114,8 +186,11 @@ class PolicyModule(nn.Module):
         return self.act(obs)
 
 
-def policy_module(policy: CheckpointPolicy) -> PolicyModule:
-    """The exportable module of a checkpoint policy (copies: later training does not change it)."""
+def policy_module(policy: CheckpointPolicy, precision: str = "float32") -> PolicyModule:
+    """The exportable module of a checkpoint policy (copies: later training does not change it) in ``precision``
+    (one of ``PRECISIONS``)."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r} (choose {' or '.join(PRECISIONS)})")
     layout = policy.config.layout
     if layout.version != OBSERVATION_LAYOUT_VERSION:
         raise ValueError(f"the policy was trained on {policy.config.task} (observation layout {layout.version}); "
@@ -123,6 +198,7 @@ def policy_module(policy: CheckpointPolicy) -> PolicyModule:
                          "SarSearch-v1 to export")
     if policy.low.obs_dim != OBS_DIM:
         raise ValueError(f"the low-level actor takes {policy.low.obs_dim} values, the observation has {OBS_DIM}")
-    action_head = ActionHead(policy.normalizer, policy.low.actor, policy.low.scaler)
+    head = Int8ActionHead if precision == "int8" else ActionHead
+    action_head = head(policy.normalizer, policy.low.actor, policy.low.scaler)
     goal_head = GoalHead(policy.normalizer, policy.meta.actor) if policy.meta is not None else NoGoal()
     return PolicyModule(action_head, goal_head).eval().requires_grad_(False)

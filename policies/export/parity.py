@@ -5,7 +5,10 @@ random vectors (whose coverage and one-hot blocks look like nothing the policy s
 recorded from the environment: every slot of a batch flies a validation scenario, half of them with the
 policy's own actions (the states it visits) and half with uniformly random ones (states it might be pushed
 into), episodes restarting as they end; HRL-SAC slots take the meta-controller's goals every K steps.
-Agreement means actions within ``ACTION_TOLERANCE`` (float32 rounding) and identical goals.
+Agreement means identical goals and actions within the tolerance of the artifact's precision (``TOLERANCES``):
+``ACTION_TOLERANCE`` (float32 rounding) for a float32 artifact, ``INT8_ACTION_TOLERANCE`` for an int8 one (the
+rounding of int8 weights and bfloat16 activations; docs/export.md, "Precision"). The manifest states the tolerance
+its artifact was checked against.
 """
 from __future__ import annotations
 
@@ -21,6 +24,9 @@ from policies.evaluation.episodes import episode_batch
 
 PARITY_OBSERVATIONS = 10_000
 ACTION_TOLERANCE = 1e-6
+INT8_ACTION_TOLERANCE = 0.05
+TOLERANCES = {"float32": ACTION_TOLERANCE, "int8": INT8_ACTION_TOLERANCE}
+"""Largest accepted |action difference| per artifact precision (``policies.export.module.PRECISIONS``)."""
 
 
 @dataclass(frozen=True)
@@ -30,25 +36,27 @@ class Parity:
     observations: int
     max_action_difference: float
     goal_mismatches: int
+    tolerance: float = ACTION_TOLERANCE
 
     @property
     def ok(self) -> bool:
-        return self.max_action_difference <= ACTION_TOLERANCE and self.goal_mismatches == 0
+        return self.max_action_difference <= self.tolerance and self.goal_mismatches == 0
 
     def summary(self) -> str:
         return (f"{self.observations:,} observations, max |action difference| {self.max_action_difference:.1e} "
-                f"(tolerance {ACTION_TOLERANCE:.0e}), {self.goal_mismatches} different goals")
+                f"(tolerance {self.tolerance:.0e}), {self.goal_mismatches} different goals")
 
 
 def check_parity(policy: CheckpointPolicy, artifact: Policy, obs: np.ndarray) -> Parity:
-    """Compare actions and goals of the eager ``policy`` and the loaded ``artifact`` on the same batch."""
+    """Compare actions and goals of the eager ``policy`` and the loaded ``artifact`` on the same batch, against the
+    tolerance of the artifact's precision."""
     difference = np.abs(policy.act(obs).astype(np.float64) - artifact.act(obs))
     # NaN anywhere (in either) is a failure, not something max() may skip.
     max_difference = float(difference.max()) if np.isfinite(difference).all() else float("inf")
     meta_obs = obs[:, :META_OBS_DIM]
     expected = policy.choose_goals(meta_obs) if policy.hierarchical else np.full(len(obs), NO_GOAL)
     mismatches = int(np.count_nonzero(expected != artifact.select_goal(meta_obs)))
-    return Parity(len(obs), max_difference, mismatches)
+    return Parity(len(obs), max_difference, mismatches, TOLERANCES[artifact.manifest.precision])
 
 
 def record_observations(policy: CheckpointPolicy, count: int = PARITY_OBSERVATIONS, envs: int = 100,
