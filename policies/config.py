@@ -160,7 +160,10 @@ class TrainConfig:
     (uniform, as in the warm-up; the meta-controller then learns only in the meta-only phase, against the low level
     it will fly with, so ``meta_only_steps`` must be above 0). Random goals keep a meta-controller that learns
     against an early, clumsy low level from collapsing onto the goal that costs least per segment (hovering at
-    home) while the low level still has everything to learn."""
+    home) while the low level still has everything to learn. On SarSearch-v1, random goals (and the warm-up's)
+    are ReturnToBase from the bingo call on (``missions.belief_search.BINGO_RESERVE_S``): uniform goals almost never
+    bring a drone all the way home, and a low level that never learned to land there circled home at 21 m and full
+    speed until the sortie ran dry, whatever the meta-controller chose."""
     meta_returned_reward: float | None = None
     """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
     environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward

@@ -37,7 +37,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from missions.goals import GOAL_NAMES
+from missions.belief_search import BINGO_RESERVE_S
+from missions.goals import GOAL_NAMES, RETURN_TO_BASE
 from missions.mission_file import load_mission
 from policies.agents.discrete_sac import DiscreteSAC
 from policies.agents.n_step import NStepReturns
@@ -148,6 +149,9 @@ class Trainer:
         meta_obs = self.obs[need, :self.meta_dim]
         if self.step < self.config.warmup_steps or not self.meta_learns:
             goals = self.rng.integers(0, len(GOAL_NAMES), size=int(need.sum()))
+            margin = getattr(self.env.core, "bingo_margin_s", None)  # SarSearch-v1: home from the bingo call on
+            if margin is not None:
+                goals[margin[need] <= BINGO_RESERVE_S] = RETURN_TO_BASE
         else:
             goals = self.meta.act(self._norm(meta_obs))
         all_goals = np.zeros(self.config.num_envs, dtype=np.int64)
