@@ -473,6 +473,28 @@ def test_meta_keep_best_with_a_ran_dry_limit_prefers_the_safe_meta_controller(tm
         small_config("hrl-sac", meta_keep_best_max_ran_dry=1.5)
 
 
+def test_random_goals_go_home_from_the_bingo_call_on(tmp_path):
+    """In the warm-up and the joint phase's random goals (SarSearch-v1), a search past the bingo call gets
+    ReturnToBase, the others their uniform draw, and the draws of the generator are the same either way."""
+    from missions.belief_search import BINGO_RESERVE_S
+    from missions.goals import RETURN_TO_BASE
+
+    config = small_config("hrl-sac", num_envs=8, meta_joint_goals="random", meta_only_steps=400)
+    trainer = Trainer(config, tmp_path)
+    core = trainer.env.core
+    assert np.all(core.bingo_margin_s > BINGO_RESERVE_S)  # at home, with the whole endurance left
+    core.time_s[:4] = core.scen.endurance_s[:4] - BINGO_RESERVE_S + 1.0  # four of them past the bingo call
+    state = trainer.rng.bit_generator.state
+    expected = np.random.default_rng()
+    expected.bit_generator.state = state
+    uniform = expected.integers(0, 4, size=8)
+    trainer.needs_goal[:] = True
+    trainer._choose_goals()
+    assert core.goal[:4].tolist() == [RETURN_TO_BASE] * 4
+    assert core.goal[4:].tolist() == uniform[4:].tolist()
+    assert trainer.rng.bit_generator.state == expected.bit_generator.state
+
+
 def test_meta_keep_best_needs_an_evaluation_handed_to_the_trainer(tmp_path):
     config = small_config("hrl-sac", total_steps=1_600, meta_only_steps=1_000, meta_keep_best=True, eval_every=100)
     with pytest.raises(ValueError, match="meta_keep_best chooses by quick evaluations: give the Trainer an evaluate"):
