@@ -145,7 +145,8 @@ class CheckpointPolicy:
                   input_mask=config.low_level_input_mask)
         meta = None
         if config.algo == "hrl-sac":
-            meta = DiscreteSAC(layout.meta_dim, len(GOAL_NAMES), config, seed=config.seed + 1)
+            meta = DiscreteSAC(layout.meta_dim, len(GOAL_NAMES), config, seed=config.seed + 1,
+                               input_mask=config.meta_input_mask)
         return cls(config, RunningMeanStd((layout.dim,)), low, meta, 0, Path("untrained"))
 
     @property

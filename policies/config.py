@@ -148,6 +148,13 @@ class TrainConfig:
     """Floor on the meta temperature, a second guard against a deterministic meta-policy."""
     meta_updates_per_transition: int = 1
     """Meta-controller gradient updates per completed meta transition (one every K steps per environment)."""
+    meta_ignores: tuple[str, ...] = ()
+    """Meta observation fields (``autonomy.observation`` names) that the meta-controller's actor and critics ignore
+    (an input mask, as ``low_level_ignores``; the input stays as wide). () = it sees everything (the paper). On
+    SarSearch-v1 the goals are grounded on the belief map by the search logic, and the meta observation also
+    carries the map's summary (``belief_remaining``, ``belief_peak_offset``); its 256 cells are most of the meta
+    observation, and what decides between searching on, looking at a candidate and going home lies in the other
+    28 values."""
     meta_only_steps: int = 0
     """HRL-SAC: the last this many of ``total_steps`` train the meta-controller alone, against the low level as it
     will fly: the low-level networks and the observation normaliser are frozen, the low level acts with its mean
@@ -283,6 +290,10 @@ class TrainConfig:
         if unknown or isinstance(self.low_level_ignores, str):
             raise ValueError(f"TrainConfig.low_level_ignores must be a list of {self.task} observation field names "
                              f"({', '.join(names)}), got {self.low_level_ignores!r}")
+        meta_names = [f.name for f in self.layout.fields if f.name != "goal"]
+        if isinstance(self.meta_ignores, str) or any(name not in meta_names for name in self.meta_ignores):
+            raise ValueError(f"TrainConfig.meta_ignores must be a list of {self.task} meta observation field names "
+                             f"({', '.join(meta_names)}), got {self.meta_ignores!r}")
         counts = (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                   ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8), ("meta_buffer_size", 1, 10**8),
                   ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1), ("meta_updates_per_transition", 1, 64),
@@ -343,6 +354,16 @@ class TrainConfig:
         return keep
 
     @property
+    def meta_input_mask(self) -> np.ndarray | None:
+        """(meta_dim,) 0 / 1: the meta observation features the meta-controller's networks see; None = all."""
+        if not self.meta_ignores:
+            return None
+        keep = np.ones(self.layout.meta_dim, dtype=np.float32)
+        for name in self.meta_ignores:
+            keep[self.layout.by_name[name].slice] = 0.0
+        return keep
+
+    @property
     def sac_gamma(self) -> float:
         """The discount of the continuous SAC this config trains: the low level's (HRL-SAC) or flat SAC's."""
         return self.low_level_gamma if self.algo == "hrl-sac" else self.gamma
@@ -378,4 +399,5 @@ class TrainConfig:
         data.setdefault("task", "SarSearch-v0")  # runs from before SarSearch-v1 trained on v0
         ignores = data.get("low_level_ignores", ())  # runs from before the field saw everything
         data["low_level_ignores"] = (ignores,) if isinstance(ignores, str) else tuple(ignores)
+        data["meta_ignores"] = tuple(data.get("meta_ignores", ()))
         return cls(**data)

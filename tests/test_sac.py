@@ -630,3 +630,26 @@ def test_masked_inputs_change_no_output_and_get_no_gradient():
         moved = (layer.weight.detach() != old).any(dim=0)
         assert not moved[:6][keep == 0].any() and moved[:6][keep == 1].all()
         assert moved[6:].all()  # the critic's action inputs are always seen
+
+
+def test_the_meta_controller_can_ignore_fields_and_only_known_ones():
+    from autonomy.observation import LAYOUT_V4
+
+    config = TrainConfig(meta_ignores=("belief",))
+    mask = config.meta_input_mask
+    assert mask.shape == (LAYOUT_V4.meta_dim,) and mask[LAYOUT_V4.by_name["belief"].slice].sum() == 0
+    assert mask.sum() == LAYOUT_V4.meta_dim - 256 and TrainConfig().meta_input_mask is None
+    meta = DiscreteSAC(LAYOUT_V4.meta_dim, 4, config, seed=2, input_mask=mask)
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((8, LAYOUT_V4.meta_dim)).astype(np.float32)
+    other = obs.copy()
+    other[:, mask == 0] = rng.standard_normal((8, 256)) * 100  # only the belief differs
+    np.testing.assert_array_equal(meta.probabilities(obs), meta.probabilities(other))
+    for a, b in zip(meta.critic.all_actions(torch.from_numpy(obs)), meta.critic.all_actions(torch.from_numpy(other))):
+        torch.testing.assert_close(a, b)
+    with pytest.raises(ValueError, match=r"meta_ignores must be a list of SarSearch-v1 meta observation field names "
+                                         r"\(agent_position, .*altitude\), got \('goal',\)"):
+        TrainConfig(meta_ignores=("goal",))
+    legacy = TrainConfig().to_dict()
+    del legacy["meta_ignores"]  # runs from before the field: the meta-controller saw everything
+    assert TrainConfig.from_dict(legacy).meta_input_mask is None

@@ -51,7 +51,8 @@ class DiscreteSAC(CheckpointedAgent):
         seed: the only source of randomness (network init, goal sampling, dropout masks).
     """
 
-    def __init__(self, obs_dim: int, n_actions: int, config: TrainConfig, seed: int = 0):
+    def __init__(self, obs_dim: int, n_actions: int, config: TrainConfig, seed: int = 0,
+                 input_mask: np.ndarray | None = None):
         if n_actions < 2:
             raise ValueError(f"n_actions must be at least 2, got {n_actions}")
         self.config = config
@@ -64,8 +65,8 @@ class DiscreteSAC(CheckpointedAgent):
         init_seed, sample_seed, dropout_seed = derive_seeds(seed, 3)
         with torch.random.fork_rng(devices=[]):  # initialise from our seed, leave the global RNG as it was
             torch.manual_seed(init_seed)
-            self.actor = CategoricalActor(obs_dim, n_actions, config.meta_actor)
-            self.critic = TwinQDiscrete(obs_dim, n_actions, config.meta_critic)
+            self.actor = CategoricalActor(obs_dim, n_actions, config.meta_actor, input_mask)
+            self.critic = TwinQDiscrete(obs_dim, n_actions, config.meta_critic, input_mask)
         self.critic_target = copy.deepcopy(self.critic).eval().requires_grad_(False)
         initial = max(math.log(config.initial_alpha), self._min_log_alpha)
         self.log_alpha = torch.tensor(initial, dtype=torch.float32, requires_grad=True)

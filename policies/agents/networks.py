@@ -257,10 +257,10 @@ class SquashedGaussianActor(nn.Module):
 class CategoricalActor(nn.Module):
     """Discrete policy: obs (B, obs_dim) -> logits (B, n_actions) of a categorical distribution."""
 
-    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig):
+    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig, input_mask: np.ndarray | None = None):
         super().__init__()
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.net = mlp(obs_dim, net, n_actions)
+        self.net = mlp(obs_dim, net, n_actions, input_mask)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.net(obs)
@@ -313,11 +313,13 @@ class TwinQDiscrete(nn.Module):
     (B * n rows) for the soft value and the policy loss.
     """
 
-    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig):
+    def __init__(self, obs_dim: int, n_actions: int, net: NetworkConfig, input_mask: np.ndarray | None = None):
         super().__init__()
         self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.q1 = mlp(obs_dim + n_actions, net, 1)
-        self.q2 = mlp(obs_dim + n_actions, net, 1)
+        # input_mask covers the observation; the goal one-hot is always seen
+        mask = None if input_mask is None else np.concatenate([np.asarray(input_mask).reshape(-1), np.ones(n_actions)])
+        self.q1 = mlp(obs_dim + n_actions, net, 1, mask)
+        self.q2 = mlp(obs_dim + n_actions, net, 1, mask)
         # Not persistent: a constant, it has no place in checkpoints.
         self.register_buffer("eye", torch.eye(n_actions), persistent=False)
 

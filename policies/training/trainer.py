@@ -96,7 +96,8 @@ class Trainer:
         self.n_step = NStepReturns(cfg.n_step, cfg.sac_gamma, cfg.num_envs) if cfg.n_step > 1 else None
         self.meta = self.meta_buffer = None
         if self.hrl:
-            self.meta = DiscreteSAC(self.meta_dim, len(GOAL_NAMES), cfg, seed=cfg.seed + 1)
+            self.meta = DiscreteSAC(self.meta_dim, len(GOAL_NAMES), cfg, seed=cfg.seed + 1,
+                                    input_mask=cfg.meta_input_mask)
             self.meta_buffer = self._new_meta_buffer()
         n = cfg.num_envs
         self.step = 0  # environment steps so far (summed over environments)
