@@ -41,10 +41,15 @@ from missions.mission import Mission
 from missions.search import ScenarioBatch
 from missions.shield import shield_velocity
 
-END_REASONS = ("victim reached", "return to base", "returned home", "endurance exhausted", "step limit",
-               "entered a danger zone", "left the geofence")
+END_REASONS = ("victim reached", "return to base", "returned home", "bingo failsafe", "endurance exhausted",
+               "step limit", "entered a danger zone", "left the geofence")
 """Why a search ends (``Decision.end``); "victim reached" is the one success: the victim confirmed by a close look
 and within the reach radius."""
+BINGO_FAILSAFE_S = 10.0
+"""The pilot ends the search ("bingo failsafe"; the runner's RTL then flies home) once flying home at full speed
+would leave no more than this of the sortie's endurance, whatever the policy chose. The meta-controller had its
+bingo call at ``missions.belief_search.BINGO_RESERVE_S`` (20 s); a learned policy is not trusted with the last of
+the fuel, as PX4's and ArduPilot's battery failsafes do not trust a companion computer with the battery."""
 
 
 @dataclass(frozen=True)
@@ -64,8 +69,9 @@ class Decision:
     end: str | None = None
     """None while searching; else one of END_REASONS: "victim reached" (the one success), "return to base" (the
     meta-controller chose ReturnToBase after the drone had left home), "returned home" (a flat policy came back
-    over home), "endurance exhausted" (the sortie's endurance is used up), "step limit", "entered a danger zone" or
-    "left the geofence"."""
+    over home), "bingo failsafe" (the policy kept searching past its last chance to fly home: ``BINGO_FAILSAFE_S``),
+    "endurance exhausted" (the sortie's endurance is used up), "step limit", "entered a danger zone" or "left the
+    geofence"."""
     action: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     """The policy's raw action (NaN if it returned one: the runner's guard decides)."""
     altitude_m: float | None = None
@@ -74,10 +80,13 @@ class Decision:
 
 
 class SearchPilot:
-    """Turns filtered positions into policy decisions for one mission; see the module docstring."""
+    """Turns filtered positions into policy decisions for one mission; see the module docstring.
+    ``bingo_failsafe_s``: see ``BINGO_FAILSAFE_S`` (None: off, the policy alone decides when to go home)."""
 
-    def __init__(self, mission: Mission, policy: Policy, seed: int = 0):
+    def __init__(self, mission: Mission, policy: Policy, seed: int = 0,
+                 bingo_failsafe_s: float | None = BINGO_FAILSAFE_S):
         self.mission, self.policy = mission, policy
+        self.bingo_failsafe_s = bingo_failsafe_s
         self.flight = mission.flight
         self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
         # how the artifact's movement is read: north / east, or towards / right of the observation's target
@@ -112,6 +121,8 @@ class SearchPilot:
             out = state.advance(position, self.intensity, self.zoom, self.flight.step_period_s)
             self._segment_reached |= bool(out.goal_reached[0])
             end = self._end_reason(out)
+            if end is None and self._past_bingo():
+                end = "bingo failsafe"
         new_goal = False
         if end is None and self.policy.hierarchical and state.goal_due(self.subgoal_interval)[0]:
             self._close_segment()
@@ -144,6 +155,11 @@ class SearchPilot:
                         float(self.zoom[0]), int(state.goal[0]), tuple(state.goal_point[0].tolist()), new_goal,
                         end, tuple(float(a) for a in action),
                         None if target == self.flight.altitude_m else target)
+
+    def _past_bingo(self) -> bool:
+        state = self.state
+        return (self.bingo_failsafe_s is not None and bool(state.left_home[0])
+                and float(state.bingo_margin_s[0]) <= self.bingo_failsafe_s)
 
     def _end_reason(self, out) -> str | None:
         for ended, reason in ((out.success, "victim reached"), (out.collision, "entered a danger zone"),

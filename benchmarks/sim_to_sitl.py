@@ -53,7 +53,7 @@ def main() -> int:
     env, env_training_rules = (
         run_episodes(episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical,
                                    **environment),
-                     lambda batch: policy.act(batch.obs), choose_goals, return_to_base_ends_search=flight_rules)
+                     lambda batch: policy.act(batch.obs), choose_goals, flight_rules=flight_rules)
         for flight_rules in (True, False))
     env_seconds = time.perf_counter() - started
     scenarios = episode_batch(args.split, args.episodes, flight, goal_conditioned=policy.hierarchical,

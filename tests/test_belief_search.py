@@ -340,6 +340,31 @@ def test_return_to_base_ends_the_flown_search_only_once_the_drone_has_left_home(
     assert ends[60] == "return to base" and np.hypot(*position) > 50.0  # the second, chosen away from home, did
 
 
+def test_the_pilots_bingo_failsafe_ends_a_search_the_policy_would_not_end_in_time():
+    """A policy that keeps searching past its last chance to fly home: the pilot ends the search ("bingo
+    failsafe", the runner's RTL) once the way home would leave no more than BINGO_FAILSAFE_S of the endurance;
+    without the failsafe the same flight runs dry."""
+    from autonomy.search_pilot import BINGO_FAILSAFE_S, SearchPilot
+    from missions.mission import Mission
+
+    scenario = Scenario(area=AREA, datum_north_m=600.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=120.0,
+                        targets=(Target("person", 900.0, 400.0, primary=True),), name="far-out")
+    outcomes = {}
+    for failsafe in (BINGO_FAILSAFE_S, None):
+        pilot = SearchPilot(Mission(scenario=scenario), GoalScript([TRACK_OBJECT]), seed=7, bingo_failsafe_s=failsafe)
+        position = np.zeros(2)
+        for step in range(200):
+            decision = pilot.decide(position.copy())
+            if decision.end is not None:
+                break
+            position = position + np.array(decision.velocity_ne) * 1.0
+        margin = float(pilot.state.bingo_margin_s[0])
+        outcomes[failsafe] = (decision.end, step, margin)
+    end, step, margin = outcomes[BINGO_FAILSAFE_S]
+    assert end == "bingo failsafe" and BINGO_FAILSAFE_S - 2.0 < margin <= BINGO_FAILSAFE_S
+    assert outcomes[None][0] == "endurance exhausted" and outcomes[None][1] > step
+
+
 def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_does():
     from missions.goals import RETURN_TO_BASE
     from policies.env.core import SarSearchConfig
@@ -350,5 +375,28 @@ def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_d
                         targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
     core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0, 1])
     record = run_episodes(core, lambda c: np.zeros((c.n, 4), dtype=np.float32),
-                          lambda meta_obs: np.full(len(meta_obs), RETURN_TO_BASE), return_to_base_ends_search=True)
+                          lambda meta_obs: np.full(len(meta_obs), RETURN_TO_BASE), flight_rules=True)
     assert record["length"].tolist() == [200, 200]  # never away from home: hovered until the endurance ran out
+
+
+def test_the_evaluations_flight_rules_end_a_search_at_the_pilots_bingo_failsafe():
+    """The same policy, flown out and kept searching: training's rules let the sortie run dry, the flight rules
+    end it where the pilot's failsafe would (at most BINGO_FAILSAFE_S of the way home's margin left)."""
+    from autonomy.search_pilot import BINGO_FAILSAFE_S
+    from policies.env.core import SarSearchConfig
+    from policies.env.tasks import make_batch
+    from policies.evaluation.episodes import run_episodes
+
+    scenario = Scenario(area=AREA, datum_north_m=600.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=120.0,
+                        targets=(Target("person", 900.0, 400.0, primary=True),), name="far-out")
+    north = np.array([1.0, 0.0, 1.0, 0.0], dtype=np.float32)  # straight north, sensor on
+    lengths, ran_dry = {}, {}
+    for rules in (False, True):
+        core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0])
+        record = run_episodes(core, lambda c: np.tile(north, (c.n, 1)),
+                              lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT), flight_rules=rules)
+        lengths[rules], ran_dry[rules] = int(record["length"][0]), bool(record["ran_dry"][0])
+    assert ran_dry[False] and lengths[False] == 120
+    assert not ran_dry[True] and lengths[True] < 120
+    # ended on the step the margin fell to BINGO_FAILSAFE_S: 10 m/s north from home, so home is t * 10 m away
+    assert abs(lengths[True] - (120.0 - BINGO_FAILSAFE_S) / 2.0) <= 2.0

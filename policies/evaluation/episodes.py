@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 
+from autonomy.search_pilot import BINGO_FAILSAFE_S
 from missions.goals import RETURN_TO_BASE
 from missions.mission import FlightSettings
 from policies.env.core import SarSearchBatch, SarSearchConfig
@@ -27,15 +28,16 @@ GoalFn = Callable[[np.ndarray], np.ndarray]
 
 
 def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None = None,
-                 return_to_base_ends_search: bool = False) -> dict[str, np.ndarray]:
+                 flight_rules: bool = False) -> dict[str, np.ndarray]:
     """Fly every slot of ``core`` to the end of its current episode; per-episode outcome arrays.
 
     ``act(core)`` returns (N, 4) actions; ``choose_goals(meta_obs)`` (HRL) returns goal indices for the rows it
-    is given, called every K steps. ``return_to_base_ends_search``: the mission runner's rule (a ReturnToBase
-    decision ends the search once the drone has left home (SarSearch-v1; on v0 always): the vehicle is sent home
-    with RTL) instead of training's (ReturnToBase is a sub-goal
-    like the others, flown by the low level until the next decision); used to compare flight with the
-    environment on equal terms (benchmarks/sim_to_sitl.py).
+    is given, called when the search state's ``goal_due`` says so. ``flight_rules``: the mission runner's rules
+    instead of training's: a ReturnToBase decision ends the search once the drone has left home (SarSearch-v1; on
+    v0 always: the vehicle is sent home with RTL; in training ReturnToBase is a sub-goal like the others, flown by
+    the low level until the next decision), and so does the pilot's bingo failsafe (SarSearch-v1,
+    ``autonomy.search_pilot.BINGO_FAILSAFE_S``); used to compare flight with the environment on equal terms
+    (benchmarks/sim_to_sitl.py).
     """
     n, k = core.n, core.flight.subgoal_interval
     done = np.zeros(n, dtype=bool)
@@ -55,7 +57,7 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
                 goals = np.zeros(n, dtype=np.int64)
                 goals[decide] = choose_goals(core.meta_observation[decide])
                 core.set_goals(goals, decide)
-                if return_to_base_ends_search:
+                if flight_rules:
                     gave_up = decide & (goals == RETURN_TO_BASE) & getattr(core, "left_home", True)
                     _record_end(record, gave_up, core.steps, core.first_detection_step, core.episode_return,
                                 core.coverage_ratio)
@@ -67,6 +69,14 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
         if choose_goals is not None:
             reached |= np.hypot(*(info["position"] - info["goal_point"]).T) <= core.flight.reach_radius_m
         ended = (terminated | truncated) & ~done
+        if flight_rules and hasattr(core, "bingo_margin_s"):  # the pilot's bingo failsafe ends the search: RTL
+            failsafe = ~done & ~ended & core.left_home & (core.bingo_margin_s <= BINGO_FAILSAFE_S)
+            _record_end(record, failsafe, info["steps"], info["first_detection_step"], info["episode_return"],
+                        info["coverage_ratio"])
+            done |= failsafe
+            if choose_goals is not None:
+                segments += failsafe
+                reached_segments += failsafe & reached
         for key in END_KEYS:
             if key in info:  # SarSearch-v0 has neither an endurance nor a home to return to
                 record[key][ended] = info[key][ended]
