@@ -263,3 +263,8 @@ def test_v1_rows_scripted_streams_constant_goals_iqm_and_verdicts(tmp_path):
     assert verdicts["Random"]["above_non_overlapping_seeds"]  # 70 % against 0 %
     assert set(verdicts) >= {"flat SAC (default)", "HRL-SAC's low level, always TrackObject", "Greedy Bayesian"}
     assert (tmp_path / "report" / "found_by.png").exists()
+    # the mean extrinsic reward across runs (it prices a lost aircraft), with its t interval, and its verdict
+    expected = np.mean([json.loads((p / "eval_test.json").read_text())["reward_mean"] for p in paths[:3]])
+    assert hrl["reward_seed_mean"] == pytest.approx(expected) and hrl["reward_t95"][0] <= expected
+    assert verdicts["Random"]["hrl_reward_mean"] == pytest.approx(expected)
+    assert f"reward {expected:.1f} vs" in report

@@ -104,10 +104,16 @@ def pooled_stats(metrics: list[dict]) -> dict:
 
 
 def group_stats(metrics: list[dict]) -> dict:
-    """:func:`pooled_stats` plus the across-seed statistics of the success rate."""
+    """:func:`pooled_stats` plus the across-seed statistics of the success rate and of the mean extrinsic reward
+    (the paper's cumulative reward: on SarSearch-v1 it prices a lost aircraft, -50 for running dry, beside the
+    +100 of a success)."""
     rates = [float(m["success_rate"]) for m in metrics]
     mean, std, interval = t_interval(rates)
     if interval is not None:
         interval = (max(0.0, interval[0]), min(1.0, interval[1]))
+    rewards = [float(m["reward_mean"]) for m in metrics]
+    reward_mean, _, reward_interval = t_interval(rewards)
     return {"seeds": len(metrics), "seed_success": rates, "success_mean": mean, "success_std": std,
-            "success_t95": list(interval) if interval else None, **pooled_stats(metrics)}
+            "success_t95": list(interval) if interval else None, "seed_reward": rewards,
+            "reward_seed_mean": reward_mean, "reward_t95": list(reward_interval) if reward_interval else None,
+            **pooled_stats(metrics)}

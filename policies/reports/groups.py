@@ -92,12 +92,24 @@ def verdicts_against(hrl: dict, others: list[dict]) -> list[dict]:
             "seed_intervals_overlap": intervals_overlap(hrl["success_t95"], other["success_t95"]) if ok else None,
             "above_non_overlapping_iqm": bool(iqm and hrl["aggregate"]["iqm_ci95"][0]
                                               > other["aggregate"]["iqm_ci95"][1]),
+            "hrl_reward_mean": hrl.get("reward_seed_mean"), "other_reward_mean": other.get("reward_seed_mean"),
+            "reward_above_non_overlapping_seeds": bool(hrl.get("reward_t95") and other.get("reward_t95")
+                                                       and hrl["reward_t95"][0] > other["reward_t95"][1]),
         })
     return found
 
 
 def _pct(x) -> str:
     return "—" if x is None else f"{100 * x:.1f} %"
+
+
+def _num(x) -> str:
+    return "—" if x is None else f"{x:.1f}"
+
+
+def _reward(row: dict) -> str:
+    interval = row.get("reward_t95")
+    return _num(row.get("reward_seed_mean")) + ("" if not interval else f" [{interval[0]:.1f}, {interval[1]:.1f}]")
 
 
 def _ci(interval) -> str:
@@ -113,14 +125,14 @@ def render_task_table(summary: dict) -> list[str]:
            "with other detection draws). IQM: interquartile mean over runs x the 12 condition strata "
            f"({' x '.join(STRATA)}), with a stratified-bootstrap 95 % interval (policies/evaluation/aggregate.py).", "",
            "| method | runs | success (mean ± std, t 95 %) | IQM [bootstrap 95 %] | pooled [Wilson 95 %] | ran dry | "
-           "returned | collision | out of bounds |", "|---|---|---|---|---|---|---|---|---|"]
+           "returned | reward (mean, t 95 %) | collision | out of bounds |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         aggregate_ = r.get("aggregate")
         iqm = f"{_pct(aggregate_['iqm'])} {_ci(aggregate_['iqm_ci95'])}" if aggregate_ else "—"
         spread = f"{100 * r['success_mean']:.1f} ± {100 * (r['success_std'] or 0.0):.1f} % {_ci(r['success_t95'])}"
         out.append(f"| {r['label']} | {r['seeds']} | {spread} | {iqm} | {_pct(r['success'])} {_ci(r['wilson95'])} | "
-                   f"{_pct(r.get('ran_dry_rate'))} | {_pct(r.get('returned_rate'))} | {_pct(r['collision_rate'])} | "
-                   f"{_pct(r['out_of_bounds_rate'])} |")
+                   f"{_pct(r.get('ran_dry_rate'))} | {_pct(r.get('returned_rate'))} | {_reward(r)} | "
+                   f"{_pct(r['collision_rate'])} | {_pct(r['out_of_bounds_rate'])} |")
     out += ["", "P(found by t): the share of all episodes (not only the successful ones) in which the victim had been "
                 "confirmed and reached by t seconds of flight (mean over runs).", "",
             "| method | " + " | ".join(times) + " |", "|---|" + "---|" * len(times)]
@@ -129,9 +141,12 @@ def render_task_table(summary: dict) -> list[str]:
     for verdict in summary.get("task_verdicts", []):
         word = ("**above, with non-overlapping 95 % intervals across seeds**" if verdict["above_non_overlapping_seeds"]
                 else "not above with non-overlapping intervals across seeds")
+        reward = ("above" if verdict.get("reward_above_non_overlapping_seeds") else "not above")
         out.append(f"- HRL-SAC ({_pct(verdict['hrl_success_mean'])}) vs {verdict['against']} "
                    f"({_pct(verdict['other_success_mean'])}): {word}; IQM intervals "
-                   f"{'separate' if verdict['above_non_overlapping_iqm'] else 'not separate above'}.")
+                   f"{'separate' if verdict['above_non_overlapping_iqm'] else 'not separate above'}; reward "
+                   f"{_num(verdict.get('hrl_reward_mean'))} vs {_num(verdict.get('other_reward_mean'))}: {reward} "
+                   f"with non-overlapping intervals.")
     return out + [""]
 
 
