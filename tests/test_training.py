@@ -288,7 +288,11 @@ def test_train_and_evaluate_commands(tmp_path):
                                capture_output=True, text=True, timeout=300)
     assert evaluated.returncode == 0, evaluated.stderr
     metrics = json.loads((run / "eval_val.json").read_text())
-    assert metrics["episodes"] == 4 and metrics["algo"] == "sac"
+    assert metrics["episodes"] == 4 and metrics["algo"] == "sac" and not metrics["flight_rules"]
+    flown = subprocess.run([*base, "evaluate", str(run), "--split", "val", "--episodes", "4", "--flight-rules"],
+                           capture_output=True, text=True, timeout=300)
+    assert flown.returncode == 0 and "eval_val_flight.json" in flown.stdout, flown.stderr
+    assert json.loads((run / "eval_val_flight.json").read_text())["flight_rules"]
     missing = subprocess.run([*base, "evaluate", str(tmp_path / "nothing")], capture_output=True, text=True,
                              timeout=120)
     assert missing.returncode == 2 and "no checkpoint" in missing.stderr

@@ -30,7 +30,11 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     scenarios.add_argument("--generator", default=None, help="generator config file (YAML) to draw the split from")
     parser.add_argument("--constant-goal", default=None, help="HRL-SAC: fly this goal (a GOAL_NAMES name) at every "
                                                               "decision with the learned low level")
-    parser.add_argument("--out", default=None, help="metrics file (default: RUN/eval_SPLIT[_NAME][_goal-GOAL].json)")
+    parser.add_argument("--flight-rules", action="store_true",
+                        help="fly with the mission runner's rules instead of training's: a ReturnToBase decision ends "
+                             "the search (RTL) and so does the pilot's bingo failsafe (what a real flight does)")
+    parser.add_argument("--out", default=None,
+                        help="metrics file (default: RUN/eval_SPLIT[_NAME][_goal-GOAL][_flight].json)")
     add_pool_arguments(parser)
     args = parser.parse_args(argv)
     if args.episodes is not None and args.episodes < 1:
@@ -45,13 +49,15 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
         pool = pool_from_arguments(args)
         if pool.workers > 1 or pool.uses_ray:
             print(f"evaluating {episodes} episodes on {pool.describe()}", file=sys.stderr, flush=True)
-        metrics = evaluate_checkpoint(args.run, args.split, episodes, pool, _chunk_done, environment, goal)
+        metrics = evaluate_checkpoint(args.run, args.split, episodes, pool, _chunk_done, environment, goal,
+                                      flight_rules=args.flight_rules)
     except (FileNotFoundError, ValueError, KeyError, WorkerPoolError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     metrics["scenarios"] = name or f"generator split {args.split}"
     run = Path(args.run)
-    suffix = (f"_{name}" if name else "") + (f"_goal-{args.constant_goal}" if args.constant_goal else "")
+    suffix = ((f"_{name}" if name else "") + (f"_goal-{args.constant_goal}" if args.constant_goal else "")
+              + ("_flight" if args.flight_rules else ""))
     out = Path(args.out) if args.out else (run if run.is_dir() else run.parent) / f"eval_{args.split}{suffix}.json"
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(json.dumps(metrics, indent=2))

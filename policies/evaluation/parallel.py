@@ -50,6 +50,8 @@ class EpisodeChunk:
     """HRL-SAC: fly this goal at every decision instead of the meta-controller's (the learned low level flies it)."""
     environment: dict = field(default_factory=dict)
     """Further ``SarSearchConfig`` fields: the scenarios (``generator``, or a fixed list ``scenarios``)."""
+    flight_rules: bool = False
+    """Fly with the mission runner's rules (``policies.evaluation.episodes.run_episodes``)."""
 
 
 def padded(fn: Callable[[np.ndarray], np.ndarray], rows: int = MIN_POLICY_ROWS) -> Callable[[np.ndarray], np.ndarray]:
@@ -71,17 +73,19 @@ def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
     return fly_policy(policy, episode_batch(chunk.split, chunk.episodes, policy.config.flight,
                                             goal_conditioned=policy.hierarchical, slots=chunk.slots,
                                             task=policy.config.task, action_frame=policy.config.action_frame,
-                                            **chunk.environment), chunk.constant_goal)
+                                            **chunk.environment), chunk.constant_goal, chunk.flight_rules)
 
 
-def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None) -> dict[str, np.ndarray]:
+def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None,
+               flight_rules: bool = False) -> dict[str, np.ndarray]:
     """The per-episode outcome arrays of ``policy`` (deterministic, padded calls) flying every slot of ``core``;
-    ``constant_goal``: that goal at every decision instead of the meta-controller's."""
+    ``constant_goal``: that goal at every decision instead of the meta-controller's; ``flight_rules``: the mission
+    runner's rules instead of training's."""
     act = padded(policy.act)
     choose = padded(policy.choose_goals) if policy.hierarchical else None
     if constant_goal is not None:
         choose = lambda meta_obs: np.full(len(meta_obs), constant_goal)  # noqa: E731
-    return run_episodes(core, lambda batch: act(batch.obs), choose)
+    return run_episodes(core, lambda batch: act(batch.obs), choose, flight_rules=flight_rules)
 
 
 def quick_evaluation(policy: CheckpointPolicy) -> dict[str, float]:
@@ -101,7 +105,7 @@ def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]
 
 def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None = None,
                        on_done: Callable[[int, int], None] | None = None, environment: dict | None = None,
-                       constant_goal: int | None = None) -> dict:
+                       constant_goal: int | None = None, flight_rules: bool = False) -> dict:
     """The paper's metrics of the checkpoint at ``path`` (file or run folder) on the first ``episodes``
     scenarios of ``split`` (or of ``environment``'s: ``generator`` / ``scenarios``), flown on ``pool`` (default: in
     this process). ``on_done(chunks_done, chunks)`` reports progress; ``constant_goal``: see :class:`EpisodeChunk`."""
@@ -114,21 +118,23 @@ def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None 
     if constant_goal is not None and config.algo != "hrl-sac":
         raise ValueError(f"{path}: a constant goal needs an HRL-SAC run (this one is {config.algo})")
     chunks = [EpisodeChunk(policy_state, str(path), split, episodes, slots, environment=dict(environment or {}),
-                           constant_goal=constant_goal)
+                           constant_goal=constant_goal, flight_rules=flight_rules)
               for slots in contiguous_chunks(episodes, pool.workers)]
     finished = []
     progress = None if on_done is None else (lambda index, _: (finished.append(index), on_done(len(finished), len(chunks))))
     record = merge_records(run_tasks(fly_chunk, chunks, pool, progress))
     return {"algo": config.algo, "preset": config.preset, "seed": config.seed, "checkpoint": str(path),
             "trained_steps": int(policy_state["step"]), "split": split, "task": config.task,
-            "max_steps": config.flight.max_steps, "constant_goal": constant_goal,
+            "max_steps": config.flight.max_steps, "constant_goal": constant_goal, "flight_rules": flight_rules,
             **summarise(record, config.flight.step_period_s)}
 
 
 def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None,
-                        environment: dict | None = None, constant_goal: int | None = None) -> dict:
+                        environment: dict | None = None, constant_goal: int | None = None,
+                        flight_rules: bool = False) -> dict:
     """The paper's metrics of a trained run's deterministic policy on ``split`` (or on ``environment``'s scenarios:
     ``SarSearchConfig`` fields ``generator`` or ``scenarios``); with ``pool`` (an ``simulation.worker_pool.PoolConfig``)
     the episodes are split across workers, with identical results. ``constant_goal``: HRL-SAC's learned low level
-    flying that goal at every decision."""
-    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal)
+    flying that goal at every decision; ``flight_rules``: the mission runner's rules (ReturnToBase and the pilot's
+    bingo failsafe end the search) instead of training's."""
+    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal, flight_rules)
