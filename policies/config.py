@@ -265,6 +265,11 @@ class TrainConfig:
     meta-controller of the joint phase), instead of the last one. Model selection on the val split (as
     Stable-Baselines3's EvalCallback keeps its best model), so the test split stays untouched; it needs
     ``eval_every`` > 0, and it judges best with ``eval_episodes`` episodes (use a few hundred)."""
+    eval_flight_rules: bool = False
+    """Quick evaluations (and so ``meta_keep_best``) fly with the mission runner's rules instead of training's: a
+    ReturnToBase decision ends the search and so does the pilot's bingo failsafe (SarSearch-v1;
+    ``hrlsac evaluate --flight-rules``). The meta-controller is then chosen by the success it would have in flight,
+    where running dry cannot happen, instead of by a trade of success against sorties that ran dry."""
     meta_keep_best_max_ran_dry: float = 1.0
     """With ``meta_keep_best``: only evaluations in which at most this share of the sorties ran dry compete on
     success (while none qualifies, the one with the fewest wins), the rule the scripted searchers are tuned with

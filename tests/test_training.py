@@ -425,6 +425,21 @@ def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
     assert float(evaluations[-1]) == final["success_rate"]
 
 
+def test_quick_evaluations_can_fly_with_the_mission_runners_rules(tmp_path):
+    """eval_flight_rules: the quick evaluation is what hrlsac evaluate --flight-rules gives on the same scenarios."""
+    import dataclasses
+
+    trainer = Trainer(small_config("hrl-sac", eval_every=0), tmp_path)
+    trainer.run(progress=False)
+    policy = CheckpointPolicy.load(tmp_path)
+    for rules in (False, True):
+        policy.config = dataclasses.replace(policy.config, eval_flight_rules=rules, eval_episodes=6)
+        quick = quick_evaluation(policy)
+        full = evaluate_checkpoint(tmp_path, split="val", episodes=6, flight_rules=rules)
+        assert quick == {"success_rate": full["success_rate"], "ran_dry_rate": full["ran_dry_rate"]}
+        assert full["flight_rules"] == rules
+
+
 def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp_path):
     """The evaluations' scores are scripted (a real small run scores 0 everywhere, which would not tell the best
     apart): the joint phase's evaluation at step 500 scores highest but is not a candidate; in the phase, step

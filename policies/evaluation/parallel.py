@@ -91,10 +91,11 @@ def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None,
 def quick_evaluation(policy: CheckpointPolicy) -> dict[str, float]:
     """The trainer's quick evaluation (``Trainer(evaluate=...)``): the success rate and the share of sorties that ran
     dry of the deterministic policy on the first ``eval_episodes`` val scenarios, in this process, with its own
-    environments."""
+    environments; with ``TrainConfig.eval_flight_rules``, flown with the mission runner's rules."""
     cfg = policy.config
     record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=policy.hierarchical,
-                                              task=cfg.task, action_frame=cfg.action_frame))
+                                              task=cfg.task, action_frame=cfg.action_frame),
+                        flight_rules=cfg.eval_flight_rules)
     return {"success_rate": float(record["success"].mean()), "ran_dry_rate": float(record["ran_dry"].mean())}
 
 
