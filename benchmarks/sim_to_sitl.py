@@ -2,9 +2,10 @@
 mission replay (MAVLink both ways, the autopilot's rules, 100 Hz dynamics, noisy telemetry through the Kalman
 filter). Target: success rates within 5 points.
 
-The environment is evaluated twice: under the mission runner's rule (a ReturnToBase decision ends the search,
-the vehicle returns with RTL), which is what the gap is measured against, and under training's rule
-(ReturnToBase is a sub-goal like the others), to show how much that rule alone changes.
+The environment is evaluated twice: under the mission runner's rules (a ReturnToBase decision ends the search,
+the vehicle returns with RTL, and so does the pilot's bingo failsafe), which is what the gap is measured against,
+and under training's rules (ReturnToBase is a sub-goal like the others, and a sortie may run dry), to show how
+much those rules alone change.
 
 Scenario i of the split is flown with episode seed i in both (the same detection draws for the same path).
 The environment flies the artifact through the same runtime (``autonomy.policy``) the runner uses.

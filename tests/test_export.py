@@ -324,6 +324,10 @@ def test_export_and_policy_info_commands(runs, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert f"wrote {out}" in printed and "hrl-sac policy, torch-export" in printed
     assert "parity with the checkpoint: 10,000 observations" in printed and printed.rstrip().endswith("ok")
+    int8 = tmp_path / "policy-int8.pt"
+    assert export_main([str(runs["hrl-sac"]), "-o", str(int8), "--precision", "int8", "--check"]) == 0
+    assert "int8 (actions within 0.05 of the trained policy)" in capsys.readouterr().out
+    assert load_policy(int8).manifest.precision == "int8"
     assert policy_main(["info", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "check: ok" in printed and "ReturnToBase: home" in printed
