@@ -268,3 +268,12 @@ def test_v1_rows_scripted_streams_constant_goals_iqm_and_verdicts(tmp_path):
     assert hrl["reward_seed_mean"] == pytest.approx(expected) and hrl["reward_t95"][0] <= expected
     assert verdicts["Random"]["hrl_reward_mean"] == pytest.approx(expected)
     assert f"reward {expected:.1f} vs" in report
+    # hrlsac compare --flight-rules reads the runs' eval_test_flight[_goal-GOAL].json
+    for path in paths:
+        for name in ("eval_test.json", "eval_test_goal-TrackObject.json"):
+            if (path / name).exists():
+                flown = name.replace("eval_test", "eval_test_flight")
+                (path / flown).write_text((path / name).read_text())
+    flight = compare(paths, tmp_path / "flight", split="test", progress=None, streams=1, scenarios="flight")
+    assert "flown with the mission runner's rules" in (tmp_path / "flight" / "report.md").read_text()
+    assert [row["label"] for row in flight["constant_goals"]] == ["HRL-SAC's low level, always TrackObject"]

@@ -23,7 +23,11 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                         help="SarSearch-v1: detection streams (runs) per scripted searcher (default 5)")
     parser.add_argument("--generator", default=None,
                         help="SarSearch-v1: compare on this generator config file's scenarios (the runs' "
-                             "eval_SPLIT_generator-NAME.json of hrlsac evaluate --generator FILE)")
+                             "eval_SPLIT_generator-NAME.json of hrlsac evaluate --generator FILE)"),
+    parser.add_argument("--flight-rules", action="store_true",
+                        help="SarSearch-v1: compare the runs' evaluations under the mission runner's rules (hrlsac "
+                             "evaluate --flight-rules: eval_SPLIT[_generator-NAME]_flight.json); the scripted "
+                             "searchers fly their own rules either way")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
@@ -48,6 +52,8 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
             except ValueError as exc:
                 raise CompareError(str(exc)) from None
             scenarios = f"generator-{Path(args.generator).stem}"
+        if args.flight_rules:  # the runs' evaluations with hrlsac evaluate --flight-rules
+            scenarios = f"{scenarios}_flight" if scenarios else "flight"
         summary = compare(args.runs, args.out, split=args.split, episodes=args.episodes, evaluate=args.evaluate,
                           command=shlex.join(["hrlsac", "compare", *argv]),
                           progress=None if args.quiet else sys.stderr, streams=args.streams, generator=generator,

@@ -34,7 +34,7 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
                         help="fly with the mission runner's rules instead of training's: a ReturnToBase decision ends "
                              "the search (RTL) and so does the pilot's bingo failsafe (what a real flight does)")
     parser.add_argument("--out", default=None,
-                        help="metrics file (default: RUN/eval_SPLIT[_NAME][_goal-GOAL][_flight].json)")
+                        help="metrics file (default: RUN/eval_SPLIT[_NAME][_flight][_goal-GOAL].json)")
     add_pool_arguments(parser)
     args = parser.parse_args(argv)
     if args.episodes is not None and args.episodes < 1:
@@ -56,8 +56,8 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
         return 2
     metrics["scenarios"] = name or f"generator split {args.split}"
     run = Path(args.run)
-    suffix = ((f"_{name}" if name else "") + (f"_goal-{args.constant_goal}" if args.constant_goal else "")
-              + ("_flight" if args.flight_rules else ""))
+    suffix = ((f"_{name}" if name else "") + ("_flight" if args.flight_rules else "")
+              + (f"_goal-{args.constant_goal}" if args.constant_goal else ""))
     out = Path(args.out) if args.out else (run if run.is_dir() else run.parent) / f"eval_{args.split}{suffix}.json"
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(json.dumps(metrics, indent=2))

@@ -120,7 +120,11 @@ def render_report(summary: dict, groups: dict[tuple[str, str], list[Run]], fligh
            f"Every method flew the first {episodes} scenarios of the {split} split once each (scenario i, "
            f"deterministic policy) with the same flight settings: altitude {flight.altitude_m:g} m, max speed "
            f"{flight.max_speed_mps:g} m/s, one step = {flight.step_period_s:g} s, K = {flight.subgoal_interval}, "
-           f"step limit {flight.max_steps}, reach radius {flight.reach_radius_m:g} m.", "",
+           f"step limit {flight.max_steps}, reach radius {flight.reach_radius_m:g} m."
+           + (" The learned policies' evaluations were flown with the mission runner's rules (`hrlsac evaluate "
+              "--flight-rules`: a ReturnToBase decision and the pilot's bingo failsafe end the search, as in a real "
+              "flight); the scripted searchers fly their own rules either way."
+              if str(summary.get("scenarios", "")).endswith("flight") else ""), "",
            "## Results", "",
            "| Method | seeds | success (mean ± std across seeds, 95 % CI) | pooled success [Wilson 95 %] | reward | "
            "coverage | length (steps) | sub-goal reachability | median time to find (steps) |",
