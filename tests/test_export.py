@@ -194,12 +194,21 @@ def test_export_embeds_the_evaluation_of_that_checkpoint_only(runs, tmp_path):
     metrics = {"split": "test", "trained_steps": 400, "episodes": 3, "success_rate": 0.5, "per_episode": {}}
     (run / "eval_test.json").write_text(json.dumps(metrics))
     (run / "eval_val.json").write_text(json.dumps({**metrics, "split": "val", "trained_steps": 200}))
+    others = {  # under the flight rules, on other scenarios, and a constant goal's (not the policy's own)
+        "eval_test_flight.json": {**metrics, "flight_rules": True, "success_rate": 0.6},
+        "eval_test_generator-large.json": {**metrics, "scenarios": "generator-large", "success_rate": 0.2},
+        "eval_test_goal-TrackObject.json": {**metrics, "constant_goal": 2, "success_rate": 0.9}}
+    for name, content in others.items():
+        (run / name).write_text(json.dumps(content))
     try:
         result = export_policy(run, tmp_path / "policy.pt")
     finally:
-        (run / "eval_test.json").unlink()
-        (run / "eval_val.json").unlink()
-    assert result.manifest.evaluation == {"test": {k: v for k, v in metrics.items() if k != "per_episode"}}
+        for name in ("eval_test.json", "eval_val.json", *others):
+            (run / name).unlink()
+    plain = {k: v for k, v in metrics.items() if k != "per_episode"}
+    assert result.manifest.evaluation == {
+        "test": plain, "test, flight rules": {**plain, "flight_rules": True, "success_rate": 0.6},
+        "test (generator-large)": {**plain, "scenarios": "generator-large", "success_rate": 0.2}}
     assert result.notes == ["left out eval_val.json: it evaluated step 200, the checkpoint is at step 400"]
 
 

@@ -124,8 +124,10 @@ def read_checkpoint(path: Path | str) -> tuple[CheckpointPolicy, str]:
 
 
 def evaluation_metrics(policy: CheckpointPolicy) -> tuple[dict | str, list[str]]:
-    """``hrlsac evaluate``'s metrics of this very checkpoint (split -> metrics, without the per-episode lists),
-    or "not evaluated"; plus notes on evaluation files that were left out (another checkpoint's)."""
+    """``hrlsac evaluate``'s metrics of this very checkpoint (evaluation -> metrics, without the per-episode lists),
+    or "not evaluated"; plus notes on evaluation files that were left out (another checkpoint's, or a constant
+    goal's, which does not evaluate the policy). An evaluation is named by its split, its scenarios when they are
+    not the split's own generator scenarios, and ", flight rules" when flown with the mission runner's rules."""
     found, notes = {}, []
     for path in sorted(policy.path.parent.glob(EVALUATION_FILES)):
         try:
@@ -140,8 +142,14 @@ def evaluation_metrics(policy: CheckpointPolicy) -> tuple[dict | str, list[str]]
             notes.append(f"left out {path.name}: it evaluated step {metrics.get('trained_steps')}, "
                          f"the checkpoint is at step {policy.step}")
             continue
-        found[str(metrics.get("split", path.stem))] = {k: v for k, v in metrics.items()
-                                                      if k not in ("per_episode", "checkpoint")}
+        if metrics.get("constant_goal") is not None:
+            continue  # the learned low level under one goal: not this policy's evaluation
+        name = str(metrics.get("split", path.stem))
+        scenarios = str(metrics.get("scenarios", ""))
+        if scenarios and not scenarios.startswith("generator split"):
+            name += f" ({scenarios})"
+        found[name + (", flight rules" if metrics.get("flight_rules") else "")] = {
+            k: v for k, v in metrics.items() if k not in ("per_episode", "checkpoint")}
     return found or NOT_EVALUATED, notes
 
 
