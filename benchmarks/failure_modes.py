@@ -64,9 +64,10 @@ def main() -> int:
     for name in args.scripted:
         metrics = run_baseline(name, args.split, args.episodes, FlightSettings(), **environment)
         rows.append({"method": name, **failure_modes(metrics["per_episode"])})
-    print(f"{'method':60s} {'success':>8s} {'never sighted (ran dry)':>24s} {'sighted, failed (ran dry)':>26s}")
+    width = max([len(row["method"]) for row in rows] + [6])
+    print(f"{'method':{width}s} {'success':>8s} {'never sighted (ran dry)':>24s} {'sighted, failed (ran dry)':>26s}")
     for row in rows:
-        print(f"{row['method'][-60:]:60s} {row['success']:8.1%} "
+        print(f"{row['method']:{width}s} {row['success']:8.1%} "
               f"{row['failed_never_sighted']:12.1%} ({row['failed_never_sighted_ran_dry']:5.1%})    "
               f"{row['failed_sighted']:13.1%} ({row['failed_sighted_ran_dry']:5.1%})", flush=True)
     write_report(args.out, {"split": args.split, "episodes": args.episodes, "generator": args.generator,

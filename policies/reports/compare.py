@@ -95,7 +95,8 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
         run.eval_command = shlex.join(["hrlsac", "evaluate", str(run.path), "--split", split,
                                        "--episodes", str(episodes)])
         if run.metrics is not None and int(run.metrics["episodes"]) == episodes:
-            _say(progress, f"{what}: eval_{split}.json, success {run.metrics['success_rate']:.1%}")
+            eval_file = f"eval_{split}{f'_{scenarios}' if scenarios else ''}.json"
+            _say(progress, f"{what}: {eval_file}, success {run.metrics['success_rate']:.1%}")
             continue
         _say(progress, f"{what}: evaluating on {split} ({episodes} episodes) ... ", end="")
         started = time.perf_counter()
