@@ -158,8 +158,9 @@ class SearchPilot:
 
     def _past_bingo(self) -> bool:
         state = self.state
-        return (self.bingo_failsafe_s is not None and bool(state.left_home[0])
-                and float(state.bingo_margin_s[0]) <= self.bingo_failsafe_s)
+        # Wherever the drone is, home included: a policy that never leaves home must not hover there until the
+        # sortie's endurance is gone either.
+        return self.bingo_failsafe_s is not None and float(state.bingo_margin_s[0]) <= self.bingo_failsafe_s
 
     def _end_reason(self, out) -> str | None:
         for ended, reason in ((out.success, "victim reached"), (out.collision, "entered a danger zone"),

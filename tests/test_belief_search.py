@@ -376,7 +376,29 @@ def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_d
     core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0, 1])
     record = run_episodes(core, lambda c: np.zeros((c.n, 4), dtype=np.float32),
                           lambda meta_obs: np.full(len(meta_obs), RETURN_TO_BASE), flight_rules=True)
-    assert record["length"].tolist() == [200, 200]  # never away from home: hovered until the endurance ran out
+    # never away from home: a hover over home, until the pilot's bingo failsafe ends the search (not a sortie
+    # flown until its endurance is gone)
+    assert record["length"].tolist() == [190, 190] and not record["ran_dry"].any()
+
+
+def test_the_pilots_bingo_failsafe_also_ends_a_search_that_never_left_home():
+    """ReturnToBase at every decision from home never ends the search by itself (it is a hover until the next
+    decision); the failsafe ends it BINGO_FAILSAFE_S before the endurance is gone, not at 0 s."""
+    from autonomy.search_pilot import BINGO_FAILSAFE_S, SearchPilot
+    from missions.goals import RETURN_TO_BASE
+    from missions.mission import Mission
+
+    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,
+                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
+    pilot = SearchPilot(Mission(scenario=scenario), GoalScript([RETURN_TO_BASE]), seed=7)
+    position = np.zeros(2)
+    for _ in range(300):
+        decision = pilot.decide(position.copy())
+        if decision.end is not None:
+            break
+        position = position + np.array(decision.velocity_ne) * 1.0
+    assert decision.end == "bingo failsafe" and not pilot.state.left_home[0]
+    assert decision.step == 200 - BINGO_FAILSAFE_S and float(pilot.state.bingo_margin_s[0]) <= BINGO_FAILSAFE_S
 
 
 def test_the_evaluations_flight_rules_end_a_search_at_the_pilots_bingo_failsafe():

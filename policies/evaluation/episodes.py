@@ -70,7 +70,7 @@ def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None =
             reached |= np.hypot(*(info["position"] - info["goal_point"]).T) <= core.flight.reach_radius_m
         ended = (terminated | truncated) & ~done
         if flight_rules and hasattr(core, "bingo_margin_s"):  # the pilot's bingo failsafe ends the search: RTL
-            failsafe = ~done & ~ended & core.left_home & (core.bingo_margin_s <= BINGO_FAILSAFE_S)
+            failsafe = ~done & ~ended & (core.bingo_margin_s <= BINGO_FAILSAFE_S)
             _record_end(record, failsafe, info["steps"], info["first_detection_step"], info["episode_return"],
                         info["coverage_ratio"])
             done |= failsafe
