@@ -340,6 +340,17 @@ def test_return_to_base_ends_the_flown_search_only_once_the_drone_has_left_home(
     assert ends[60] == "return to base" and np.hypot(*position) > 50.0  # the second, chosen away from home, did
 
 
+def fly_until_the_search_ends(pilot, max_steps: int):
+    """Fly the pilot's velocity commands exactly (1 s per step) from home; the decision that ended the search."""
+    position = np.zeros(2)
+    for _ in range(max_steps):
+        decision = pilot.decide(position.copy())
+        if decision.end is not None:
+            return decision
+        position = position + np.array(decision.velocity_ne) * 1.0
+    raise AssertionError(f"the search did not end within {max_steps} steps")
+
+
 def test_the_pilots_bingo_failsafe_ends_a_search_the_policy_would_not_end_in_time():
     """A policy that keeps searching past its last chance to fly home: the pilot ends the search ("bingo
     failsafe", the runner's RTL) once the way home would leave no more than BINGO_FAILSAFE_S of the endurance;
@@ -352,14 +363,8 @@ def test_the_pilots_bingo_failsafe_ends_a_search_the_policy_would_not_end_in_tim
     outcomes = {}
     for failsafe in (BINGO_FAILSAFE_S, None):
         pilot = SearchPilot(Mission(scenario=scenario), GoalScript([TRACK_OBJECT]), seed=7, bingo_failsafe_s=failsafe)
-        position = np.zeros(2)
-        for step in range(200):
-            decision = pilot.decide(position.copy())
-            if decision.end is not None:
-                break
-            position = position + np.array(decision.velocity_ne) * 1.0
-        margin = float(pilot.state.bingo_margin_s[0])
-        outcomes[failsafe] = (decision.end, step, margin)
+        decision = fly_until_the_search_ends(pilot, 200)
+        outcomes[failsafe] = (decision.end, decision.step, float(pilot.state.bingo_margin_s[0]))
     end, step, margin = outcomes[BINGO_FAILSAFE_S]
     assert end == "bingo failsafe" and BINGO_FAILSAFE_S - 2.0 < margin <= BINGO_FAILSAFE_S
     assert outcomes[None][0] == "endurance exhausted" and outcomes[None][1] > step
@@ -391,12 +396,7 @@ def test_the_pilots_bingo_failsafe_also_ends_a_search_that_never_left_home():
     scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,
                         targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
     pilot = SearchPilot(Mission(scenario=scenario), GoalScript([RETURN_TO_BASE]), seed=7)
-    position = np.zeros(2)
-    for _ in range(300):
-        decision = pilot.decide(position.copy())
-        if decision.end is not None:
-            break
-        position = position + np.array(decision.velocity_ne) * 1.0
+    decision = fly_until_the_search_ends(pilot, 300)
     assert decision.end == "bingo failsafe" and not pilot.state.left_home[0]
     assert decision.step == 200 - BINGO_FAILSAFE_S and float(pilot.state.bingo_margin_s[0]) <= BINGO_FAILSAFE_S
 
