@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from common import results_file, write_report
 
-from missions.belief_search import target_frame_to_north_east
+from missions.belief_search import movement_velocity
 from missions.goals import GOAL_NAMES
 from policies.checkpoint import CheckpointPolicy
 from policies.evaluation.episodes import END_KEYS, episode_batch
@@ -36,9 +36,10 @@ def fly_goal(policy: CheckpointPolicy, goal: int, split: str, episodes: int) -> 
         if decide.any():
             core.set_goals(np.full(episodes, goal), decide)
         action = act(core.obs)
-        movement = action[:, :2]
-        if config.action_frame != "north_east":
-            movement = target_frame_to_north_east(movement, core.position, core.goal_point)
+        # the velocity the environment flies (with "arrive", slowing on the way in), as a share of the top speed
+        flight = config.flight
+        movement = movement_velocity(action[:, :2], core.position, core.goal_point, config.action_frame,
+                                     flight.max_speed_mps, flight.step_period_s) / flight.max_speed_mps
         to_goal = core.goal_point - core.position
         far = (np.hypot(*to_goal.T) > config.flight.reach_radius_m) & ~done
         off = np.degrees(np.abs(np.arctan2(movement[:, 1], movement[:, 0]) - np.arctan2(to_goal[:, 1], to_goal[:, 0])))

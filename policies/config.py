@@ -169,8 +169,8 @@ class TrainConfig:
     against an early, clumsy low level from collapsing onto the goal that costs least per segment (hovering at
     home) while the low level still has everything to learn. On SarSearch-v1, random goals (and the warm-up's)
     are ReturnToBase from the bingo call on (``missions.belief_search.BINGO_RESERVE_S``): uniform goals almost never
-    bring a drone all the way home, and a low level that never learned to land there circled home at 21 m and full
-    speed until the sortie ran dry, whatever the meta-controller chose."""
+    bring a drone all the way home, and a low level that never learned to land there could not end a sortie at
+    home, whatever the meta-controller chose (docs/results/README.md, the v1 probes)."""
     meta_returned_reward: float | None = None
     """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
     environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward
@@ -290,15 +290,8 @@ class TrainConfig:
                              f"got {self.intrinsic_reward!r}")
         if self.task not in ("SarSearch-v0", "SarSearch-v1"):
             raise ValueError(f"TrainConfig.task must be 'SarSearch-v0' or 'SarSearch-v1', got {self.task!r}")
-        names = self.layout.by_name
-        unknown = [name for name in self.low_level_ignores if name not in names]
-        if unknown or isinstance(self.low_level_ignores, str):
-            raise ValueError(f"TrainConfig.low_level_ignores must be a list of {self.task} observation field names "
-                             f"({', '.join(names)}), got {self.low_level_ignores!r}")
-        meta_names = [f.name for f in self.layout.fields if f.name != "goal"]
-        if isinstance(self.meta_ignores, str) or any(name not in meta_names for name in self.meta_ignores):
-            raise ValueError(f"TrainConfig.meta_ignores must be a list of {self.task} meta observation field names "
-                             f"({', '.join(meta_names)}), got {self.meta_ignores!r}")
+        self._check_ignores("low_level_ignores", "observation", list(self.layout.by_name))
+        self._check_ignores("meta_ignores", "meta observation", [f.name for f in self.layout.fields if f.name != "goal"])
         counts = (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
                   ("meta_batch_size", 1, 65536), ("buffer_size", 1, 10**8), ("meta_buffer_size", 1, 10**8),
                   ("warmup_steps", 0, 10**9), ("seed", 0, 2**32 - 1), ("meta_updates_per_transition", 1, 64),
@@ -351,22 +344,28 @@ class TrainConfig:
     @property
     def low_level_input_mask(self) -> np.ndarray | None:
         """(obs_dim,) 0 / 1: the observation features the continuous SAC's networks see; None = all of them."""
-        if self.algo != "hrl-sac" or not self.low_level_ignores:
-            return None
-        keep = np.ones(self.layout.dim, dtype=np.float32)
-        for name in self.low_level_ignores:
-            keep[self.layout.by_name[name].slice] = 0.0
-        return keep
+        return self._input_mask(self.low_level_ignores, self.layout.dim) if self.algo == "hrl-sac" else None
 
     @property
     def meta_input_mask(self) -> np.ndarray | None:
         """(meta_dim,) 0 / 1: the meta observation features the meta-controller's networks see; None = all."""
-        if not self.meta_ignores:
+        return self._input_mask(self.meta_ignores, self.layout.meta_dim)
+
+    def _input_mask(self, ignores: tuple[str, ...], width: int) -> np.ndarray | None:
+        """(width,) ones, with zeros over the ``ignores`` fields of the layout; None when nothing is ignored."""
+        if not ignores:
             return None
-        keep = np.ones(self.layout.meta_dim, dtype=np.float32)
-        for name in self.meta_ignores:
+        keep = np.ones(width, dtype=np.float32)
+        for name in ignores:
             keep[self.layout.by_name[name].slice] = 0.0
         return keep
+
+    def _check_ignores(self, field_name: str, what: str, names: list[str]) -> None:
+        """One ValueError unless the ``field_name`` setting is a list of these ``names``."""
+        ignores = getattr(self, field_name)
+        if isinstance(ignores, str) or any(name not in names for name in ignores):
+            raise ValueError(f"TrainConfig.{field_name} must be a list of {self.task} {what} field names "
+                             f"({', '.join(names)}), got {ignores!r}")
 
     @property
     def sac_gamma(self) -> float:

@@ -23,7 +23,7 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                         help="SarSearch-v1: detection streams (runs) per scripted searcher (default 5)")
     parser.add_argument("--generator", default=None,
                         help="SarSearch-v1: compare on this generator config file's scenarios (the runs' "
-                             "eval_SPLIT_generator-NAME.json of hrlsac evaluate --generator FILE)"),
+                             "eval_SPLIT_generator-NAME.json of hrlsac evaluate --generator FILE)")
     parser.add_argument("--flight-rules", action="store_true",
                         help="SarSearch-v1: compare the runs' evaluations under the mission runner's rules (hrlsac "
                              "evaluate --flight-rules: eval_SPLIT[_generator-NAME]_flight.json); the scripted "
