@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from policies.config import TrainConfig
+from policies.agents.adam import adam_step, fused_adam, zero_grads
 from policies.agents.networks import (
     CheckpointedAgent,
     CategoricalActor,
@@ -72,8 +73,8 @@ class DiscreteSAC(CheckpointedAgent):
         self.log_alpha = torch.tensor(initial, dtype=torch.float32, requires_grad=True)
 
         lr = config.learning_rate
-        self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True)  # as in policies.agents.sac
-        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=lr, fused=True)
+        self.actor_optim = fused_adam(self.actor.parameters(), lr)  # stepped by adam_step, as in policies.agents.sac
+        self.critic_optim = fused_adam(self.critic.parameters(), lr)
         self.alpha_optim = torch.optim.Adam([self.log_alpha], lr=lr)
 
         self.generator = torch.Generator().manual_seed(sample_seed)  # goal sampling in act()
@@ -157,9 +158,9 @@ class DiscreteSAC(CheckpointedAgent):
                 y = reward + discount * (1.0 - done) * self.soft_value(next_obs, alpha)
             q1, q2 = self.critic(obs, action)
             critic_loss = (w * ((q1 - y).square() + (q2 - y).square())).mean()
-            self.critic_optim.zero_grad(set_to_none=True)
+            zero_grads(self.critic_optim)
             critic_loss.backward()
-            self.critic_optim.step()
+            adam_step(self.critic_optim)
 
             # --- actor: the expectation over actions is a sum, so Q enters as a constant (no reparameterisation).
             log_pi = F.log_softmax(self.actor(obs), -1)
@@ -168,14 +169,14 @@ class DiscreteSAC(CheckpointedAgent):
                 q1_all, q2_all = self.critic.all_actions(obs)
                 q_min = torch.min(q1_all, q2_all)
             actor_loss = (pi * (alpha * log_pi - q_min)).sum(-1).mean()
-            self.actor_optim.zero_grad(set_to_none=True)
+            zero_grads(self.actor_optim)
             actor_loss.backward()
-            self.actor_optim.step()
+            adam_step(self.actor_optim)
 
             # --- temperature: gradient H - target, so alpha grows when the entropy is below the target.
             entropy = -(pi.detach() * log_pi.detach()).sum(-1)
             alpha_loss = (self.log_alpha * (entropy - self.target_entropy)).mean()
-            self.alpha_optim.zero_grad(set_to_none=True)
+            zero_grads(self.alpha_optim)
             alpha_loss.backward()
             self.alpha_optim.step()
             with torch.no_grad():

@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from policies.config import TrainConfig
+from policies.agents.adam import adam_step, fused_adam, zero_grads
 from policies.agents.networks import (
     CheckpointedAgent,
     ActionScaler,
@@ -82,10 +83,8 @@ class SAC(CheckpointedAgent):
         self.log_alpha = torch.tensor(math.log(config.initial_alpha), dtype=torch.float32, requires_grad=True)
 
         lr = config.learning_rate
-        # fused=True: one kernel per optimiser step for all of a network's tensors, without the temporaries of
-        # torch's per-tensor (CPU default) or foreach paths. It rounds differently from those (same arithmetic).
-        self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True)
-        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=lr, fused=True)
+        self.actor_optim = fused_adam(self.actor.parameters(), lr)  # stepped by adam_step
+        self.critic_optim = fused_adam(self.critic.parameters(), lr)
         self.alpha_optim = torch.optim.Adam([self.log_alpha], lr=lr)
 
         self.generator = torch.Generator().manual_seed(noise_seed)  # the policy's Gaussian noise
@@ -191,9 +190,9 @@ class SAC(CheckpointedAgent):
     def _critic_step(self, q1: torch.Tensor, q2: torch.Tensor, y: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
         """The critics' loss (PER-weighted squared errors of both against y) and their optimiser step."""
         critic_loss = (w * ((q1 - y).square() + (q2 - y).square())).mean()
-        self.critic_optim.zero_grad(set_to_none=True)
+        zero_grads(self.critic_optim)
         critic_loss.backward()
-        self.critic_optim.step()
+        adam_step(self.critic_optim)
         self._weights.forget_casts(self._critic_params)
         return critic_loss
 
@@ -206,10 +205,10 @@ class SAC(CheckpointedAgent):
         alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
         # One backward pass for both: the two losses share no parameter (the actor loss sees alpha detached, the
         # alpha loss sees log pi detached), so each gets exactly the gradient of its own loss, bit for bit.
-        self.actor_optim.zero_grad(set_to_none=True)
-        self.alpha_optim.zero_grad(set_to_none=True)
+        zero_grads(self.actor_optim)
+        zero_grads(self.alpha_optim)
         (actor_loss + alpha_loss).backward()
-        self.actor_optim.step()
+        adam_step(self.actor_optim)
         self.alpha_optim.step()
         self._weights.forget_casts(self._actor_params)
         return actor_loss, alpha_loss
