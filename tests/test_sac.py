@@ -14,7 +14,8 @@ from torch.distributions import Independent, Normal, TransformedDistribution
 from torch.distributions.transforms import TanhTransform
 
 from policies.agents.discrete_sac import DiscreteSAC
-from policies.agents.networks import ActionScaler, CategoricalActor, SquashedGaussianActor, TwinQ, TwinQDiscrete, mlp
+from policies.agents.action_scaler import ActionScaler
+from policies.agents.networks import CategoricalActor, SquashedGaussianActor, TwinQ, TwinQDiscrete, mlp
 from policies.agents.sac import SAC
 from policies.config import NetworkConfig, TrainConfig
 

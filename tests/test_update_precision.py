@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from policies.agents.networks import ActionGradientOnly, UpdateWeights, polyak_update
+from policies.agents.networks import ActionGradientOnly, UpdateWeights
+from policies.agents.shared import polyak_update
 from policies.agents.sac import SAC
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.core import ACTION_HIGH, ACTION_LOW

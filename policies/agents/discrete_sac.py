@@ -28,15 +28,8 @@ import torch.nn.functional as F
 
 from policies.config import TrainConfig
 from policies.agents.adam import adam_step, fused_adam, zero_grads
-from policies.agents.networks import (
-    CheckpointedAgent,
-    CategoricalActor,
-    PrivateTorchRNG,
-    TwinQDiscrete,
-    as_float_tensor,
-    derive_seeds,
-    polyak_update,
-)
+from policies.agents.networks import CategoricalActor, TwinQDiscrete
+from policies.agents.shared import CheckpointedAgent, PrivateTorchRNG, as_float_tensor, derive_seeds, polyak_update
 
 METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
 

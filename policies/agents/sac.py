@@ -15,7 +15,7 @@ Conventions:
 - Actions cross this API in the *environment* range [low, high]; inside, actor and critics work in [-1, 1].
 - ``done`` is *termination* only: a time-limit truncation still bootstraps.
 - Randomness: network initialisation, the policy's Gaussian noise (``self.generator``) and the dropout masks
-  (a private global-RNG stream, :class:`policies.agents.networks.PrivateTorchRNG`) come from three streams derived
+  (a private global-RNG stream, :class:`policies.agents.shared.PrivateTorchRNG`) come from three streams derived
   from ``seed``; the caller's global torch RNG is neither used nor changed. All three are in ``state_dict``,
   so a resumed run gives bit-identical next updates.
 - Dropout (paper preset) is active for the online networks during updates; ``act`` always runs the actor in
@@ -36,17 +36,9 @@ import torch
 
 from policies.config import TrainConfig
 from policies.agents.adam import adam_step, fused_adam, zero_grads
-from policies.agents.networks import (
-    CheckpointedAgent,
-    ActionScaler,
-    PrivateTorchRNG,
-    SquashedGaussianActor,
-    TwinQ,
-    UpdateWeights,
-    as_float_tensor,
-    derive_seeds,
-    polyak_update,
-)
+from policies.agents.action_scaler import ActionScaler
+from policies.agents.networks import SquashedGaussianActor, TwinQ, UpdateWeights
+from policies.agents.shared import CheckpointedAgent, PrivateTorchRNG, as_float_tensor, derive_seeds, polyak_update
 
 METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
 

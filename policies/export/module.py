@@ -25,7 +25,8 @@ from torch import Tensor, nn
 
 from autonomy.observation import META_OBS_DIM, NO_GOAL, OBS_DIM, OBSERVATION_LAYOUT_VERSION
 from policies.checkpoint import CheckpointPolicy
-from policies.agents.networks import ActionScaler, CategoricalActor, SquashedGaussianActor
+from policies.agents.action_scaler import ActionScaler
+from policies.agents.networks import CategoricalActor, SquashedGaussianActor
 from policies.agents.normalizer import RunningMeanStd
 
 
