@@ -13,7 +13,8 @@ import torch
 
 _PLAIN = {"amsgrad": False, "weight_decay": 0.0, "maximize": False, "capturable": False, "differentiable": False,
           "decoupled_weight_decay": False, "fused": True}
-"""The options under which Adam is exactly ``_foreach_add_(steps, 1)`` then ``_fused_adam_``."""
+"""The options under which Adam is exactly ``_foreach_add_(steps, 1)`` then ``_fused_adam_`` (an option an older torch
+does not have is at its default, the value here)."""
 
 
 def fused_adam(params, lr: float) -> torch.optim.Adam:
@@ -40,7 +41,7 @@ def adam_step(optimizer: torch.optim.Adam) -> None:
     group = groups[0]
     params = group["params"]
     state = optimizer.state
-    if (len(groups) != 1 or len(state) != len(params) or any(group[k] != v for k, v in _PLAIN.items())
+    if (len(groups) != 1 or len(state) != len(params) or any(group.get(k, v) != v for k, v in _PLAIN.items())
             or getattr(optimizer, "grad_scale", None) is not None or getattr(optimizer, "found_inf", None) is not None):
         optimizer.step()
         return
