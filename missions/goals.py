@@ -235,12 +235,18 @@ def ground_goals_v1(goal: np.ndarray, agent_ne: np.ndarray, area: np.ndarray, se
                     obstacle_valid: np.ndarray) -> np.ndarray:
     """SarSearch-v1's goal points (N, 2) for goal indices (N,), from what a crew knows:
 
-    * ExploreArea: the most attractive unsearched 125 m block (``explore_point`` on the cumulative probability of
-      detection ``searched``, blind to the prior), or SearchSpecificLocation's point once all are searched;
-    * SearchSpecificLocation: ``belief_point``, the most belief per travel;
-    * TrackObject: ``candidate_point`` (the confirmed victim, else the nearest unresolved candidate), or without
-      one SearchSpecificLocation's point;
-    * ReturnToBase: home.
+    * ExploreArea: the centre of the most attractive block of the area not yet searched (8 x 8 blocks;
+      attractiveness = unsearched share - 0.5 * distance / area diagonal, among blocks at least half unsearched;
+      searched = the cumulative probability of detection of the looks so far, blind to the prior), where its water
+      has drifted to now (``explore_point``); SearchSpecificLocation's point once every block is searched.
+    * SearchSpecificLocation: the centre of the belief cell with the most probability of holding the victim per
+      travel (log belief - distance from the drone / 200 m), where its water has drifted to now (``belief_point``).
+    * TrackObject: the confirmed victim's estimated position, else the nearest candidate not yet identified (a
+      sighting of the victim's category, drifted with the water since; ``candidate_point``); without a candidate,
+      SearchSpecificLocation's point.
+    * ReturnToBase: home (the start point).
+
+    These bullets are what an exported artifact's manifest says of its goals (``policies.export.artifact``).
 
     Points are kept ``FENCE_MARGIN_M`` inside the area and routed around the danger zones, as in SarSearch-v0."""
     point = datum.copy()

@@ -184,9 +184,27 @@ def test_manifest_round_trips_and_describes_the_checkpoint(runs, artifacts):
         assert manifest.torch_version == torch.__version__
         if algo == "hrl-sac":
             assert manifest.subgoal_interval == K and tuple(g.name for g in manifest.goals) == GOAL_NAMES
-            assert "coverage grid" in manifest.goals[0].grounding  # from missions.goals' documentation
+            # SarSearch-v1's grounding (ground_goals_v1's documentation), not SarSearch-v0's coverage grid
+            assert "belief cell" in manifest.goals[1].grounding and "candidate" in manifest.goals[2].grounding
+            assert not any("coverage grid" in goal.grounding for goal in manifest.goals)
         else:
             assert manifest.subgoal_interval is None and manifest.goals == ()
+
+
+def test_the_arrive_frame_manifest_states_the_speed_cap_the_environment_flies():
+    """The manifest's unit of an "arrive" policy's movement must be the cap ``movement_velocity`` applies: the top
+    speed, or the distance left over ARRIVAL_STEPS steps (one step would be twice as fast near the target)."""
+    from missions.belief_search import movement_velocity
+    from policies.config import TrainConfig
+    from policies.export.artifact import build_manifest
+
+    policy = CheckpointPolicy.untrained(TrainConfig.from_preset("default", algo="hrl-sac", action_frame="arrive"))
+    unit = build_manifest(policy, "torchscript", "0" * 64).action.units[0]
+    steps = float(re.search(r"distance to the target / \(([\d.]+) \* flight.step_period_s\)", unit).group(1))
+    max_speed, period, distance = 10.0, 1.0, 6.0  # near the target: the distance cap binds
+    velocity = movement_velocity(np.array([[1.0, 0.0]]), np.zeros((1, 2)), np.array([[distance, 0.0]]), "arrive",
+                                 max_speed, period)
+    assert velocity[0, 0] == pytest.approx(min(max_speed, distance / (steps * period))) and velocity[0, 1] == 0.0
 
 
 def test_export_embeds_the_evaluation_of_that_checkpoint_only(runs, tmp_path):

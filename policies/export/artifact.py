@@ -14,6 +14,7 @@ The artifact is written to a temporary file and renamed into place, after the op
 from __future__ import annotations
 
 import hashlib
+import inspect
 import io
 import json
 import os
@@ -39,6 +40,7 @@ from autonomy.policy_manifest import (
 )
 from autonomy.torch_compat import pt2_archive, torchscript_calls
 from missions import goals as goal_logic
+from missions.belief_search import ARRIVAL_STEPS
 from missions.search import SENSOR_ON_INTENSITY, ZOOM_RANGE
 from policies.checkpoint import CheckpointPolicy, checkpoint_file
 from policies.env.core import ACTION_HIGH, ACTION_LOW, ACTION_NAMES
@@ -59,9 +61,10 @@ TARGET_FRAME_UNITS = (
 """The action spec of a policy trained with ``action_frame`` "target" (SarSearch-v1)."""
 ARRIVE_FRAME_UNITS = tuple(
     unit.replace("fraction of flight.max_speed_mps", "fraction of min(flight.max_speed_mps, distance to the target / "
-                 "flight.step_period_s)") for unit in TARGET_FRAME_UNITS[:2]) + ACTION_UNITS[2:]
+                 f"({ARRIVAL_STEPS:g} * flight.step_period_s))") for unit in TARGET_FRAME_UNITS[:2]) + ACTION_UNITS[2:]
 """The action spec of a policy trained with ``action_frame`` "arrive" (SarSearch-v1): as "target", with the speed
-also capped by what covers the rest of the way to the target in one step."""
+also capped by what covers the rest of the way to the target in ``ARRIVAL_STEPS`` steps
+(``missions.belief_search.arrival_speed_fraction``)."""
 FRAME_SPECS = {"north_east": (ACTION_NAMES, ACTION_UNITS), "target": (TARGET_FRAME_NAMES, TARGET_FRAME_UNITS),
                "arrive": (TARGET_FRAME_NAMES, ARRIVE_FRAME_UNITS)}
 ENTRY_POINTS = {
@@ -154,9 +157,10 @@ def evaluation_metrics(policy: CheckpointPolicy) -> tuple[dict | str, list[str]]
 
 
 def goal_specs() -> tuple[GoalSpec, ...]:
-    """Goal names with their grounding, as documented in ``missions.goals`` (one bullet per goal)."""
+    """Goal names with their grounding on SarSearch-v1, the task every exportable policy was trained on, as
+    documented by ``missions.goals.ground_goals_v1`` (one bullet per goal)."""
     grounding = {}
-    for bullet in re.split(r"\n\* ", goal_logic.__doc__ or "")[1:]:
+    for bullet in re.split(r"\n\* ", inspect.cleandoc(goal_logic.ground_goals_v1.__doc__ or ""))[1:]:
         name, _, text = bullet.partition(":")
         grounding[name.strip()] = " ".join(text.split("\n\n")[0].split())
     return tuple(GoalSpec(i, name, grounding.get(name, "see missions/goals.py"))
