@@ -1,8 +1,11 @@
 """Training speed: flat SAC environment steps per second with one gradient update per step, ours vs Stable-Baselines3.
 
-For each network preset both agents train on SarSearch-v0 (the same environment, flight settings and scenario split)
-with one gradient update of batch 128 per environment step, one environment, one torch thread, in the same run
-(the agents take turns inside every repeat, so a change of machine load hits all of them alike):
+For each network preset both agents train on the same task (--task: SarSearch-v1 by default, the task every
+policy is trained on now; SarSearch-v0, the paper's, whose environment step is lighter, is what the figures before
+2026-12-04 measured), with the same flight settings and scenario split, one gradient update of batch 128 per
+environment step, one environment, one torch thread, in the same run (the agents take turns inside every repeat,
+so a change of machine load hits all of them alike). The environment step is the same work for both, so the
+heavier it is, the closer the ratio comes to 1:
 
   * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
                the preset's networks (LayerNorm after each hidden layer, no dropout).
@@ -28,7 +31,7 @@ to other processes on a shared machine). Targets: ours >= 1.5 x SB3 at the defau
 at 3 x 512.
 
 Usage: python benchmarks/train_speed.py [--steps 2000] [--steps-3x512 600] [--warmup 1000] [--repeats 3]
-                                        [--presets default,3x512]
+                                        [--presets default,3x512] [--task SarSearch-v1]
 """
 from __future__ import annotations
 
@@ -59,12 +62,12 @@ LABELS = {"ours": "ours (LayerNorm, float32)", "ours_noln": "ours (no LayerNorm 
 
 
 def our_config(hidden: tuple[int, ...], layer_norm: bool, num_envs: int, updates_per_step: float, warmup: int,
-               steps: int, seed: int, update_dtype: str = "float32") -> TrainConfig:
+               steps: int, seed: int, update_dtype: str = "float32", task: str = "SarSearch-v1") -> TrainConfig:
     net = NetworkConfig(hidden=hidden, layer_norm=layer_norm, dropout=0.0)
     return TrainConfig.from_preset("default", algo="sac", seed=seed, num_envs=num_envs, updates_per_step=updates_per_step,
                               warmup_steps=warmup, total_steps=warmup + steps, batch_size=BATCH_SIZE,
                               buffer_size=BUFFER_SIZE, actor=net, critic=net, checkpoint_every=10**9,
-                              log_every=10**9, torch_threads=1, update_dtype=update_dtype)
+                              log_every=10**9, torch_threads=1, update_dtype=update_dtype, task=task)
 
 
 def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, float]:
@@ -90,11 +93,12 @@ def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, floa
         return done / (clock["end"][0] - wall), done / (clock["end"][1] - cpu)
 
 
-def time_sb3(hidden: tuple[int, ...], flight, warmup: int, steps: int, seed: int) -> tuple[float, float]:
+def time_sb3(hidden: tuple[int, ...], flight, warmup: int, steps: int, seed: int,
+             task: str = "SarSearch-v1") -> tuple[float, float]:
     """(wall, CPU) steps/s of SB3's SAC.learn over ``steps`` steps after ``warmup`` untimed random ones."""
     from stable_baselines3 import SAC as SB3SAC
 
-    model = SB3SAC("MlpPolicy", SarSearchEnv(SarSearchConfig(flight=flight)), learning_rate=3e-4,
+    model = SB3SAC("MlpPolicy", SarSearchEnv(SarSearchConfig(flight=flight, task=task)), learning_rate=3e-4,
                    buffer_size=BUFFER_SIZE, learning_starts=warmup, batch_size=BATCH_SIZE, tau=0.005, gamma=0.99,
                    train_freq=1, gradient_steps=1, policy_kwargs={"net_arch": list(hidden)}, device="cpu", seed=seed,
                    verbose=0)
@@ -116,6 +120,7 @@ def main() -> int:
     parser.add_argument("--warmup", type=int, default=1_000, help="untimed random steps before each timed run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--presets", default="default,3x512", help=f"comma-separated, from {', '.join(PRESETS)}")
+    parser.add_argument("--task", default="SarSearch-v1", choices=["SarSearch-v1", "SarSearch-v0"])
     parser.add_argument("--out", default=results_file("train_speed.json"))
     args = parser.parse_args()
     presets = [name.strip() for name in args.presets.split(",") if name.strip()]
@@ -128,25 +133,24 @@ def main() -> int:
     steps = {"default": args.steps, "3x512": args.steps_3x512}
     steps = {name: max(8, steps[name] // 8 * 8) for name in presets}  # whole vector steps for ours_vec8
 
-    report: dict = {"warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats, "torch_threads": 1,
-                    "batch_size": BATCH_SIZE, "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
+    report: dict = {"task": args.task, "warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats,
+                    "torch_threads": 1, "batch_size": BATCH_SIZE, "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
     table = []
     for name in presets:
         hidden, n = PRESETS[name], steps[name]
         wall: dict[str, list[float]] = {agent: [] for agent in AGENTS}
         cpu: dict[str, list[float]] = {agent: [] for agent in AGENTS}
         for repeat in range(args.repeats):
+            def ours(layer_norm: bool, num_envs: int = 1, updates_per_step: float = 1.0, dtype: str = "float32"):
+                config = our_config(hidden, layer_norm, num_envs, updates_per_step, args.warmup, n, repeat, dtype,
+                                    args.task)
+                return lambda: time_ours(config, args.warmup, n)
+
             runs = {
-                "ours": lambda: time_ours(our_config(hidden, True, 1, 1.0, args.warmup, n, repeat), args.warmup, n),
-                "ours_noln": lambda: time_ours(our_config(hidden, False, 1, 1.0, args.warmup, n, repeat),
-                                               args.warmup, n),
-                "ours_bf16": lambda: time_ours(our_config(hidden, True, 1, 1.0, args.warmup, n, repeat, "bfloat16"),
-                                               args.warmup, n),
-                "ours_noln_bf16": lambda: time_ours(our_config(hidden, False, 1, 1.0, args.warmup, n, repeat,
-                                                               "bfloat16"), args.warmup, n),
-                "sb3": lambda: time_sb3(hidden, flight, args.warmup, n, repeat),
-                "ours_vec8": lambda: time_ours(our_config(hidden, True, 8, 0.125, args.warmup, n, repeat),
-                                               args.warmup, n),
+                "ours": ours(True), "ours_noln": ours(False),
+                "ours_bf16": ours(True, dtype="bfloat16"), "ours_noln_bf16": ours(False, dtype="bfloat16"),
+                "sb3": lambda: time_sb3(hidden, flight, args.warmup, n, repeat, args.task),
+                "ours_vec8": ours(True, num_envs=8, updates_per_step=0.125),
             }
             for agent in AGENTS:
                 w, c = runs[agent]()
