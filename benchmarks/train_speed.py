@@ -8,12 +8,12 @@ so a change of machine load hits all of them alike). The environment step is the
 heavier it is, the closer the ratio comes to 1:
 
   * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
-               the preset's networks (LayerNorm after each hidden layer, no dropout).
+               the preset's networks (LayerNorm after each hidden layer, no dropout), float32 updates: the default
+               preset as shipped (its update_dtype was bfloat16 until 2026-12-05; docs/training.md says why not now).
   * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
   * ours_bf16, ours_noln_bf16: the two above with ``TrainConfig.update_dtype="bfloat16"`` (the hidden layers'
-               matrix products of each update in bfloat16 under CPU autocast; weights, Adam, outputs and losses
-               float32). The same work per step; the speed-up needs AVX-512 BF16 or AMX (this machine has
-               AVX-512 BF16).
+               matrix products of each update in bfloat16 with CPU autocast's arithmetic; weights, Adam, outputs and
+               losses float32), an opt-in speed option. The same work per step; the speed-up needs AVX-512 BF16 or AMX.
   * sb3:       stable_baselines3.SAC("MlpPolicy", train_freq=1, gradient_steps=1, batch_size=128,
                learning_starts=--warmup, net_arch=hidden widths, device="cpu") on policies.env.gym_env.SarSearchEnv.
   * ours_vec8: extra line, NOT the same work: our vectorised configuration, num_envs=8 and updates_per_step=0.125

@@ -10,6 +10,11 @@ within 16,000 steps. Flat SAC learns from the same shaping (``flat_shaping``, is
 0 % -> 88 % in 20,000 steps (2026-12-04); from the environment reward alone it had reached 25 %, and its own
 training episodes 5 %. (On the real task the paper's distance form learns to leave the area instead; see
 TrainConfig.intrinsic_reward.)
+
+Both train with the default float32 updates. How often one seed learns, by precision, is measured by
+``benchmarks/easy_learning.py`` (docs/training.md): in float32 every seed tried gained the +20 points asked here;
+in bfloat16 HRL-SAC gained them in only a few, and which seeds did depended on the CPU's kernels (AMX or AVX-512
+BF16), so a bfloat16 test passed or failed with the machine.
 """
 from __future__ import annotations
 
@@ -54,19 +59,29 @@ def evaluate(trainer: Trainer) -> dict:
                                                                   deterministic=True), goals))
 
 
-@pytest.mark.parametrize("algo, steps", [("hrl-sac", 16_000), ("sac", 20_000)])
-def test_agent_beats_its_untrained_self_on_an_easy_mission(tmp_path, algo, steps):
+STEPS = {"hrl-sac": 16_000, "sac": 20_000}
+
+
+def easy_trainer(tmp_path, algo: str, seed: int = 0, **overrides) -> Trainer:
+    """A Trainer of ``algo`` on the easy missions (written into ``tmp_path``), with the test's budget and settings;
+    ``overrides``: other TrainConfig fields (benchmarks/easy_learning.py varies ``update_dtype``)."""
     missions = []
     for scenario in easy_scenarios():
         path = tmp_path / f"{scenario.name}.yaml"
         save_mission(Mission(scenario=scenario, flight=FLIGHT, name=scenario.name), path)
         missions.append(str(path))
-    config = TrainConfig.from_preset("default", algo=algo, seed=0, total_steps=steps, num_envs=4, warmup_steps=1_000,
-                                batch_size=64, meta_batch_size=32, buffer_size=20_000, meta_buffer_size=5_000,
-                                updates_per_step=1.0, checkpoint_every=10**9, log_every=1_000, actor=NET, critic=NET,
-                                meta_actor=NET, meta_critic=NET, flight=FLIGHT, missions=tuple(missions),
-                                intrinsic_reward="distance", flat_shaping=algo == "sac")
-    trainer = Trainer(config, tmp_path / "run")
+    config = TrainConfig.from_preset("default", algo=algo, seed=seed, total_steps=STEPS[algo], num_envs=4,
+                                     warmup_steps=1_000, batch_size=64, meta_batch_size=32, buffer_size=20_000,
+                                     meta_buffer_size=5_000, updates_per_step=1.0, checkpoint_every=10**9,
+                                     log_every=1_000, actor=NET, critic=NET, meta_actor=NET, meta_critic=NET,
+                                     flight=FLIGHT, missions=tuple(missions), intrinsic_reward="distance",
+                                     flat_shaping=algo == "sac", **overrides)
+    return Trainer(config, tmp_path / "run")
+
+
+@pytest.mark.parametrize("algo", ["hrl-sac", "sac"])
+def test_agent_beats_its_untrained_self_on_an_easy_mission(tmp_path, algo):
+    trainer = easy_trainer(tmp_path, algo)
     before = evaluate(trainer)
     trainer.run(progress=False)
     after = evaluate(trainer)

@@ -1,0 +1,108 @@
+"""Learning reliability across seeds: the easy missions of tests/test_learning.py, by algorithm and update precision.
+
+tests/test_learning.py trains one seed per algorithm and asks for +20 points of success. Whether that one seed
+learns says little about the learner; this script trains the same configuration (the test's own missions,
+networks, budget and settings, imported from it) over several seeds, in float32 and in bfloat16 updates, and
+prints each run's deterministic success before and after training on the test's 32 evaluation episodes, then how
+many runs gained the +20 points the test asks for.
+
+Each run is one process-independent Trainer on one torch thread (about 70-110 s at 16,000 / 20,000 steps here);
+``--workers`` runs that many at once. The oneDNN kernels, and so the bfloat16 bits, depend on the CPU (AMX or
+AVX-512 BF16; ``ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16`` forces the latter on an AMX machine), so the report
+records which the machine offers.
+
+Usage: python benchmarks/easy_learning.py [--algos hrl-sac,sac] [--dtypes float32,bfloat16] [--seeds 0-4]
+                                          [--workers 2] [--out benchmarks/results/easy_learning.json]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+from common import results_file, write_report  # noqa: E402
+
+GAIN = 0.2  # the test's required gain in success
+
+
+def train_once(algo: str, dtype: str, seed: int) -> dict:
+    """One run of the test's configuration with ``seed`` and ``update_dtype``; success before and after."""
+    import torch
+
+    import test_learning as easy
+
+    torch.set_num_threads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        trainer = easy.easy_trainer(pathlib.Path(tmp), algo, seed, update_dtype=dtype)
+        before = easy.evaluate(trainer)["success_rate"]
+        started = time.perf_counter()
+        trainer.run(progress=False)
+        after = easy.evaluate(trainer)["success_rate"]
+    return {"algo": algo, "dtype": dtype, "seed": seed, "success_before": before, "success_after": after,
+            "learned": bool(after >= before + GAIN), "seconds": round(time.perf_counter() - started, 1)}
+
+
+def easy_steps() -> dict[str, int]:
+    """The test's training budgets per algorithm."""
+    import test_learning
+
+    return test_learning.STEPS
+
+
+def parse_seeds(text: str) -> list[int]:
+    if "-" in text:
+        first, last = text.split("-")
+        return list(range(int(first), int(last) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+def cpu_isa() -> list[str]:
+    try:
+        flags = next(line for line in open("/proc/cpuinfo") if line.startswith("flags")).split()
+    except (OSError, StopIteration):
+        return []
+    return [flag for flag in ("avx512f", "avx512_bf16", "amx_bf16") if flag in flags]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--algos", default="hrl-sac,sac")
+    parser.add_argument("--dtypes", default="float32,bfloat16")
+    parser.add_argument("--seeds", default="0-4", help="a range (0-4) or a list (0,2,5)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", default=results_file("easy_learning.json"))
+    args = parser.parse_args()
+    algos = [a for a in args.algos.split(",") if a]
+    dtypes = [d for d in args.dtypes.split(",") if d]
+    if bad := [a for a in algos if a not in easy_steps()]:
+        parser.error(f"unknown algorithm(s) {bad}; choose from {', '.join(easy_steps())}")
+    if bad := [d for d in dtypes if d not in ("float32", "bfloat16")]:
+        parser.error(f"unknown dtype(s) {bad}; choose from float32, bfloat16")
+    jobs = [(algo, dtype, seed) for algo in algos for dtype in dtypes for seed in parse_seeds(args.seeds)]
+    runs = []
+    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+        for run in pool.map(train_once, *zip(*jobs)):
+            runs.append(run)
+            print(f"{run['algo']:8s} {run['dtype']:9s} seed {run['seed']}: success {run['success_before']:.3f} -> "
+                  f"{run['success_after']:.3f} ({run['seconds']:.0f} s)", flush=True)
+    summary = {}
+    for algo in algos:
+        for dtype in dtypes:
+            mine = [r for r in runs if r["algo"] == algo and r["dtype"] == dtype]
+            summary[f"{algo}/{dtype}"] = {"learned": sum(r["learned"] for r in mine), "runs": len(mine)}
+            print(f"{algo} {dtype}: {summary[f'{algo}/{dtype}']['learned']} of {len(mine)} seeds gained "
+                  f">= {GAIN:.0%} success")
+    write_report(args.out, {"cpu_flags": cpu_isa(), "onednn_max_cpu_isa": os.environ.get("ONEDNN_MAX_CPU_ISA"),
+                            "required_gain": GAIN, "steps": easy_steps(), "summary": summary, "runs": runs})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
