@@ -11,8 +11,14 @@ Each run is one process-independent Trainer on one torch thread (about 70-110 s 
 AVX-512 BF16; ``ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16`` forces the latter on an AMX machine), so the report
 records which the machine offers.
 
+``--first-layer-float32`` is an experiment, not a feature: it patches ``networks.UpdateWeights.hidden`` (and the
+critics' bfloat16 first-layer shortcut) so that in bfloat16 updates the first Linear layer of every network runs in
+float32 on the float32 observations (the rest as before), to test whether the inputs' rounding to bfloat16 (8 bits
+of mantissa for goal offsets and positions) is what costs HRL-SAC's learning.
+
 Usage: python benchmarks/easy_learning.py [--algos hrl-sac,sac] [--dtypes float32,bfloat16] [--seeds 0-4]
-                                          [--workers 2] [--out benchmarks/results/easy_learning.json]
+                                          [--workers 2] [--first-layer-float32]
+                                          [--out benchmarks/results/easy_learning.json]
 """
 from __future__ import annotations
 
@@ -32,12 +38,46 @@ from common import results_file, write_report  # noqa: E402
 GAIN = 0.2  # the test's required gain in success
 
 
-def train_once(algo: str, dtype: str, seed: int) -> dict:
+def first_layer_in_float32() -> None:
+    """The --first-layer-float32 experiment: patch the update's bfloat16 passes (see the module docstring)."""
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
+
+    from policies.agents import networks
+
+    if getattr(networks.UpdateWeights, "first_layer_float32", False):
+        return  # this worker process is patched already
+    original_hidden = networks.UpdateWeights.hidden
+
+    def hidden(self, layers, x, frozen=False):
+        layers = list(layers)
+        first = next((i for i, layer in enumerate(layers) if isinstance(layer, nn.Linear)), None)
+        if self.dtype != torch.bfloat16 or first is None:
+            return original_hidden(self, layers, x, frozen)
+        x = original_hidden(self, layers[:first], x, frozen)
+        linear = layers[first]
+        x = F.linear(x.float(), self.as_is(linear.weight, frozen), self.as_is(linear.bias, frozen)).to(self.dtype)
+        return original_hidden(self, layers[first + 1:], x, frozen)
+
+    def twin_q_forward_with(self, obs, act, weights, frozen=False):  # without ActionGradientOnly's bfloat16 layer
+        x = torch.cat([obs, act], dim=-1)
+        return tuple(weights.output(net[-1], weights.hidden(list(net)[:-1], x, frozen).float(), frozen).squeeze(-1)
+                     for net in (self.q1, self.q2))
+
+    networks.UpdateWeights.hidden = hidden
+    networks.UpdateWeights.first_layer_float32 = True
+    networks.TwinQ.forward_with = twin_q_forward_with
+
+
+def train_once(algo: str, dtype: str, seed: int, first_layer_float32: bool = False) -> dict:
     """One run of the test's configuration with ``seed`` and ``update_dtype``; success before and after."""
     import torch
 
     import test_learning as easy
 
+    if first_layer_float32:
+        first_layer_in_float32()
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
         trainer = easy.easy_trainer(pathlib.Path(tmp), algo, seed, update_dtype=dtype)
@@ -45,7 +85,8 @@ def train_once(algo: str, dtype: str, seed: int) -> dict:
         started = time.perf_counter()
         trainer.run(progress=False)
         after = easy.evaluate(trainer)["success_rate"]
-    return {"algo": algo, "dtype": dtype, "seed": seed, "success_before": before, "success_after": after,
+    label = dtype + ("-first-layer-float32" if first_layer_float32 else "")
+    return {"algo": algo, "dtype": label, "seed": seed, "success_before": before, "success_after": after,
             "learned": bool(after >= before + GAIN), "seconds": round(time.perf_counter() - started, 1)}
 
 
@@ -77,6 +118,8 @@ def main() -> int:
     parser.add_argument("--dtypes", default="float32,bfloat16")
     parser.add_argument("--seeds", default="0-4", help="a range (0-4) or a list (0,2,5)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--first-layer-float32", action="store_true",
+                        help="experiment: bfloat16 updates with each network's first layer in float32")
     parser.add_argument("--out", default=results_file("easy_learning.json"))
     args = parser.parse_args()
     algos = [a for a in args.algos.split(",") if a]
@@ -88,16 +131,17 @@ def main() -> int:
     jobs = [(algo, dtype, seed) for algo in algos for dtype in dtypes for seed in parse_seeds(args.seeds)]
     runs = []
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        for run in pool.map(train_once, *zip(*jobs)):
+        for run in pool.map(train_once, *zip(*jobs), [args.first_layer_float32] * len(jobs)):
             runs.append(run)
             print(f"{run['algo']:8s} {run['dtype']:9s} seed {run['seed']}: success {run['success_before']:.3f} -> "
                   f"{run['success_after']:.3f} ({run['seconds']:.0f} s)", flush=True)
     summary = {}
     for algo in algos:
         for dtype in dtypes:
-            mine = [r for r in runs if r["algo"] == algo and r["dtype"] == dtype]
-            summary[f"{algo}/{dtype}"] = {"learned": sum(r["learned"] for r in mine), "runs": len(mine)}
-            print(f"{algo} {dtype}: {summary[f'{algo}/{dtype}']['learned']} of {len(mine)} seeds gained "
+            mine = [r for r in runs if r["algo"] == algo and r["dtype"].startswith(dtype)]
+            label = mine[0]["dtype"] if mine else dtype
+            summary[f"{algo}/{label}"] = {"learned": sum(r["learned"] for r in mine), "runs": len(mine)}
+            print(f"{algo} {label}: {summary[f'{algo}/{label}']['learned']} of {len(mine)} seeds gained "
                   f">= {GAIN:.0%} success")
     write_report(args.out, {"cpu_flags": cpu_isa(), "onednn_max_cpu_isa": os.environ.get("ONEDNN_MAX_CPU_ISA"),
                             "required_gain": GAIN, "steps": easy_steps(), "summary": summary, "runs": runs})
