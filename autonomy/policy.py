@@ -12,6 +12,14 @@ reads a different observation than the one it is given would fail silently, so a
 The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step (``goal_due(step)``, which asks
 ``missions.goals.goal_due``) first ``select_goal(meta_obs)``, then the runner grounds the goal to a point
 (``missions.goals``), rebuilds the observation and acts on it. Both are deterministic (the mode of each policy).
+
+Denormal floats: both calls run their program with the CPU's flush-to-zero / denormals-are-zero mode on
+(``torch.set_flush_denormal``), as real-time inference code does, and turn it off again after it (so the caller's
+own numpy and torch arithmetic, the belief search's tiny probabilities included, is not changed; a caller that had
+turned it on itself finds it off). Observations carry denormal values (tiny belief probabilities, about a quarter
+of the steps), and on x86 every multiply with one takes a microcode assist: on an Intel Xeon that tripled the p99
+of a decision step (docs/export.md, "Latency"). A denormal is below any difference the networks resolve, so the
+actions are those of the trained networks (tests/test_export.py).
 """
 from __future__ import annotations
 
@@ -90,8 +98,12 @@ class Policy:
             batch = batch[None, :]
         if batch.ndim != 2 or batch.shape[1] != width:
             raise ValueError(f"expected observations of shape (N, {width}) or ({width},), got {np.shape(values)}")
-        with torch.inference_mode():
-            out = program(torch.from_numpy(batch)).numpy()
+        torch.set_flush_denormal(True)  # see the module docstring (a register write each way)
+        try:
+            with torch.inference_mode():
+                out = program(torch.from_numpy(batch)).numpy()
+        finally:
+            torch.set_flush_denormal(False)
         return out[0] if single else out
 
 

@@ -92,6 +92,34 @@ def test_artifact_acts_like_the_eager_policy_on_recorded_observations(runs, arti
         assert (goals == -1).all()
 
 
+def flushes_denormals() -> bool:
+    """Whether this thread's float arithmetic runs in flush-to-zero / denormals-are-zero mode."""
+    return torch.tensor([1e-39]).mul(1.0).item() == 0.0
+
+
+def test_runtime_flushes_denormals_inside_its_calls_only(artifacts, recorded):
+    """Denormal inputs (tiny belief probabilities) cost a microcode assist per multiply on x86: the programs run
+    with flush-to-zero on (autonomy/policy.py), which must leave the actions and goals those of the zeroed inputs,
+    and the caller's arithmetic (the simulation's, in a replay) as it was."""
+    tiny = np.finfo(np.float32).tiny
+    obs = recorded["hrl-sac"]
+    denormal = (obs != 0) & (np.abs(obs) < tiny)
+    assert denormal.any(axis=1).mean() > 0.05  # the environment really produces them
+    rows = obs[denormal.any(axis=1)][:200]
+    zeroed = np.where(np.abs(rows) < tiny, np.float32(0.0), rows).astype(np.float32)
+    policy = load_policy(artifacts["hrl-sac", "torchscript"])
+    seen = []
+    for name in ("_act", "_select_goal"):
+        program = getattr(policy, name)
+        setattr(policy, name, lambda x, program=program: (seen.append(flushes_denormals()), program(x))[1])
+    assert not flushes_denormals()
+    actions, goals = policy.act(rows), policy.select_goal(rows[:, :META_OBS_DIM])
+    assert seen == [True, True]  # on inside both programs ...
+    assert not flushes_denormals()  # ... and off again after them
+    assert np.array_equal(actions, policy.act(zeroed))
+    assert np.array_equal(goals, policy.select_goal(zeroed[:, :META_OBS_DIM]))
+
+
 @pytest.mark.parametrize("fmt", FORMATS)
 @pytest.mark.parametrize("algo", ALGOS)
 def test_int8_artifact_keeps_goals_and_actions_within_its_stated_tolerance(runs, recorded, tmp_path, algo, fmt):
