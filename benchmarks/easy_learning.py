@@ -4,7 +4,8 @@ tests/test_learning.py trains one seed per algorithm and asks for +20 points of 
 learns says little about the learner; this script trains the same configuration (the test's own missions,
 networks, budget and settings, imported from it) over several seeds, in float32 and in bfloat16 updates, and
 prints each run's deterministic success before and after training on the test's 32 evaluation episodes, then how
-many runs gained the +20 points the test asks for.
+many runs gained the +20 points of success the test asks for and how many pass all of its checks
+(``learning_checks`` in the test: success, reward and the training episodes' own success).
 
 Each run is one process-independent Trainer on one torch thread (about 70-110 s at 16,000 / 20,000 steps here);
 ``--workers`` runs that many at once. The oneDNN kernels, and so the bfloat16 bits, depend on the CPU (AMX or
@@ -81,13 +82,19 @@ def train_once(algo: str, dtype: str, seed: int, first_layer_float32: bool = Fal
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
         trainer = easy.easy_trainer(pathlib.Path(tmp), algo, seed, update_dtype=dtype)
-        before = easy.evaluate(trainer)["success_rate"]
+        before = easy.evaluate(trainer)
         started = time.perf_counter()
         trainer.run(progress=False)
-        after = easy.evaluate(trainer)["success_rate"]
+        after = easy.evaluate(trainer)
+        checks = easy.learning_checks(before, after, trainer)
+        train_success = float(sum(episode[0] for episode in trainer.recent) / max(len(trainer.recent), 1))
     label = dtype + ("-first-layer-float32" if first_layer_float32 else "")
-    return {"algo": algo, "dtype": label, "seed": seed, "success_before": before, "success_after": after,
-            "learned": bool(after >= before + GAIN), "seconds": round(time.perf_counter() - started, 1)}
+    return {"algo": algo, "dtype": label, "seed": seed, "success_before": before["success_rate"],
+            "success_after": after["success_rate"], "reward_before": before["reward_mean"],
+            "reward_after": after["reward_mean"], "training_success": train_success,
+            "learned": bool(after["success_rate"] >= before["success_rate"] + GAIN),
+            "passes_the_test": all(checks.values()), "checks": checks,
+            "seconds": round(time.perf_counter() - started, 1)}
 
 
 def easy_steps() -> dict[str, int]:
@@ -134,15 +141,19 @@ def main() -> int:
         for run in pool.map(train_once, *zip(*jobs), [args.first_layer_float32] * len(jobs)):
             runs.append(run)
             print(f"{run['algo']:8s} {run['dtype']:9s} seed {run['seed']}: success {run['success_before']:.3f} -> "
-                  f"{run['success_after']:.3f} ({run['seconds']:.0f} s)", flush=True)
+                  f"{run['success_after']:.3f}, training episodes {run['training_success']:.2f}, test checks "
+                  f"{'pass' if run['passes_the_test'] else 'FAIL'} ({run['seconds']:.0f} s)", flush=True)
     summary = {}
     for algo in algos:
         for dtype in dtypes:
             mine = [r for r in runs if r["algo"] == algo and r["dtype"].startswith(dtype)]
             label = mine[0]["dtype"] if mine else dtype
-            summary[f"{algo}/{label}"] = {"learned": sum(r["learned"] for r in mine), "runs": len(mine)}
+            summary[f"{algo}/{label}"] = {"learned": sum(r["learned"] for r in mine),
+                                          "passes_the_test": sum(r["passes_the_test"] for r in mine),
+                                          "runs": len(mine)}
             print(f"{algo} {label}: {summary[f'{algo}/{label}']['learned']} of {len(mine)} seeds gained "
-                  f">= {GAIN:.0%} success")
+                  f">= {GAIN:.0%} success; {summary[f'{algo}/{label}']['passes_the_test']} pass all of the "
+                  f"test's checks")
     write_report(args.out, {"cpu_flags": cpu_isa(), "onednn_max_cpu_isa": os.environ.get("ONEDNN_MAX_CPU_ISA"),
                             "required_gain": GAIN, "steps": easy_steps(), "summary": summary, "runs": runs})
     return 0
