@@ -120,7 +120,7 @@ class TrainConfig:
     what every comparison in docs/results trained with) or "bfloat16" (weights, Adam, outputs and losses stay
     float32, acting stays float32; faster on CPUs with AVX-512 BF16 or AMX, slower without). bfloat16 is a speed
     option, not a free one: on the easy missions of tests/test_learning.py HRL-SAC learned in 6 of 6 seeds in
-    float32 and in 4 of 13 in bfloat16 (docs/training.md, "update_dtype"). The two round differently: each is
+    float32 and in 2 of 6 in bfloat16 (docs/training.md, "update_dtype"). The two round differently: each is
     reproducible on a given CPU, they are not bit-equal."""
 
     # --- prioritised replay (both levels)
