@@ -1,0 +1,176 @@
+"""How much SarSearch-v1 leaves to a better decision-maker: greedy Bayes against itself with parts of the truth given.
+
+A learned meta-controller can beat the best scripted searcher only by deciding better than its fixed rules. This
+measures, on the same scenarios and detection draws, what perfect versions of each decision would be worth to the
+tuned greedy Bayes searcher (``policies.env.baselines``, ``TUNED["greedy_bayes"]``):
+
+* **oracle skip**: which candidate is the victim is known, so no decoy is ever looked at (the victim still needs its
+  close look to be confirmed): the ceiling of confirm-or-skip decisions, however they are made;
+* **victim known**: the drone flies straight at the victim from the start, and looks at it: the ceiling of the
+  task itself with this airframe, camera and endurance (what search leaves undone);
+* **best of the patterns per scenario**: a scenario counts as found when any of several tuned scripted searchers
+  (greedy Bayes with three travel-time constants, the bounded expanding square and parallel track) found it, each
+  with the same detection draws: an upper bound on choosing among those whole strategies scenario by scenario
+  (inflated by luck: a scenario one of them found by a fortunate draw counts too);
+* **best of greedy Bayes over as many detection streams**: the same union over greedy Bayes alone, flown once per
+  detection stream (the same scenarios, other draws): how much of the line above is luck.
+
+For greedy Bayes itself the report splits its failures into sorties that never sighted the victim and sorties that
+sighted it but did not confirm and reach it, and gives its success by how far the victim lay from the datum; and
+the camera model's sweep rate (effective sweep width x speed, a 0.5 m object in clear conditions at the search
+altitude) at the speeds and zooms a transit could fly, to check that greedy Bayes' transit (full speed, widest zoom)
+already searches fastest.
+
+None of these is a searcher a crew could fly; they bound what deciding better could gain. Beside the oracle skip,
+``--thresholds`` flies greedy Bayes with other ``investigate_plausibility`` values (the scripted skip rule: look only
+at candidates at least that plausible), so that the room a learned skip decision has is the oracle's line minus the
+best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distribution with that many decoys
+(``missions.generator.TASK_V1`` otherwise unchanged): a probe of task designs in which the skip decision matters.
+
+Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--decoys 1,4] [--thresholds 0.1,0.3]
+                                             [--no-patterns]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import sys
+
+import numpy as np
+from common import results_file, write_report
+
+from missions.generator import TASK_V1
+from missions.mission import FlightSettings
+from missions.sweep_width import sweep_width_m
+from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, ParallelTrack
+from policies.evaluation.episodes import episode_batch, run_episodes, summarise
+
+
+class TruthfulPlausibility:
+    """The search batch as the searcher sees it, except that ``plausibility`` is 1 for the victim's track and 0 for
+    every decoy's (with ``investigate_plausibility`` 0.5, only the victim is ever looked at)."""
+
+    def __init__(self, core):
+        self._core = core
+
+    def __getattr__(self, name):
+        return getattr(self._core, name)
+
+    @property
+    def plausibility(self) -> np.ndarray:
+        core = self._core
+        truth = np.zeros_like(core.plausibility)
+        truth[np.arange(core.n), core.scen.primary_index] = 1.0
+        return truth
+
+
+class KnownVictim(GreedyBayes):
+    """Greedy Bayes whose search point is the victim's true position now (the close look and reach rules as ever)."""
+
+    def search_point(self, fresh: np.ndarray) -> np.ndarray:
+        core = self.core
+        return core.targets[np.arange(core.n), core.scen.primary_index]
+
+
+def fly(make, split: str, episodes: int, stream: int = 0, generator=TASK_V1) -> dict:
+    flight = FlightSettings()
+    targets = 1 + generator.max_distractors + generator.decoys_max
+    core = episode_batch(split, episodes, flight, goal_conditioned=False, stream=stream, task="SarSearch-v1",
+                         generator=generator, max_targets=max(targets, 16))
+    searcher = make(core)
+    return summarise(run_episodes(core, lambda _core: searcher.act()), flight.step_period_s), core.scen
+
+
+def failure_split(metrics: dict, scen) -> dict:
+    """Where a searcher's failures lie: never sighted / sighted but not reached, and success by the victim's
+    distance from the datum in datum sigmas (bands 0-1, 1-2, 2-3, 3+)."""
+    success = np.array(metrics["per_episode"]["success"], dtype=bool)
+    sighted = np.array(metrics["per_episode"]["first_detection"]) >= 0
+    rows = np.arange(len(success))
+    sigmas = np.hypot(*(scen.targets[rows, scen.primary_index[rows]] - scen.datum[rows]).T) / scen.datum_sigma[rows]
+    bands = {}
+    for low, high in ((0, 1), (1, 2), (2, 3), (3, np.inf)):
+        inside = (sigmas >= low) & (sigmas < high)
+        bands[f"{low}-{high:g} sigma"] = {"scenarios": int(inside.sum()),
+                                          "success_rate": float(success[inside].mean()) if inside.any() else None}
+    return {"failed_never_sighted": float((~success & ~sighted).mean()),
+            "failed_sighted": float((~success & sighted).mean()), "success_by_victim_offset": bands}
+
+
+def sweep_rates(flight: FlightSettings) -> dict[str, float]:
+    """Sweep width x speed (m^2/s) of a 0.5 m object in clear conditions, by 'zoom z, v m/s'."""
+    rates = {}
+    for zoom in (0.0, 0.25, 0.5, 1.0):
+        for fraction in (0.4, 0.6, 0.8, 1.0):
+            speed = fraction * flight.max_speed_mps
+            width = sweep_width_m(flight.altitude_m, zoom, speed, flight.step_period_s, np.array([0.5]), np.array([1.0]))
+            rates[f"zoom {zoom:g}, {speed:g} m/s"] = float(speed * width[0])
+    return rates
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=500)
+    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--decoys", default=None, help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
+    parser.add_argument("--thresholds", default="", help="comma-separated investigate_plausibility values to fly")
+    parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
+    parser.add_argument("--out", default=results_file("decision_ceiling.json"))
+    args = parser.parse_args()
+    generator = TASK_V1
+    if args.decoys:
+        low, high = (int(v) for v in args.decoys.split(","))
+        generator = dataclasses.replace(TASK_V1, decoys_min=low, decoys_max=high)
+    greedy = TUNED["greedy_bayes"]
+    oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
+    patterns = {
+        "greedy_bayes": lambda core: GreedyBayes(core, greedy),
+        "greedy_bayes, travel_time_s 10": lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=10.0)),
+        "greedy_bayes, travel_time_s 100": lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=100.0)),
+        "expanding_square": lambda core: ExpandingSquare(core, TUNED["expanding_square"]),
+        "parallel_track": lambda core: ParallelTrack(core, TUNED["parallel_track"]),
+    }
+    if args.no_patterns:
+        patterns = {"greedy_bayes": patterns["greedy_bayes"]}
+    skips = {f"greedy_bayes, investigate_plausibility {value:g}":
+             functools.partial(GreedyBayes, settings=dataclasses.replace(greedy, investigate_plausibility=value))
+             for value in (float(v) for v in args.thresholds.split(",") if v.strip())}
+    oracles = {
+        "greedy_bayes, oracle skip": lambda core: GreedyBayes(TruthfulPlausibility(core), oracle_skip),
+        "victim known": lambda core: KnownVictim(core, greedy),
+    }
+    report = {"command": " ".join(["python benchmarks/decision_ceiling.py"] + sys.argv[1:]), "split": args.split,
+              "episodes": args.episodes, "decoys": [generator.decoys_min, generator.decoys_max],
+              "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
+    found = []
+    for name, make in {**patterns, **skips, **oracles}.items():
+        metrics, scen = fly(make, args.split, args.episodes, generator=generator)
+        success = np.array(metrics["per_episode"]["success"], dtype=bool)
+        if name in patterns:
+            found.append(success)
+        report["results"][name] = {key: metrics[key] for key in ("success_rate", "ran_dry_rate", "returned_rate",
+                                                                 "collision_rate", "steps_to_success")}
+        if name == "greedy_bayes":
+            report["results"][name].update(failure_split(metrics, scen))
+        print(f"{name:34s} success {100 * metrics['success_rate']:5.1f} %  ran dry {100 * metrics['ran_dry_rate']:.1f} %"
+              f"  returned {100 * metrics['returned_rate']:.1f} %", flush=True)
+    if args.no_patterns:
+        write_report(args.out, report)
+        return 0
+    best_of = float(np.any(found, axis=0).mean())
+    report["results"]["best of the patterns per scenario"] = {"success_rate": best_of, "of": list(patterns)}
+    print(f"{'best of the patterns per scenario':34s} success {100 * best_of:5.1f} %")
+    streams = [found[0]] + [np.array(fly(patterns["greedy_bayes"], args.split, args.episodes, stream, generator)[0]
+                                     ["per_episode"]["success"], dtype=bool) for stream in range(1, len(patterns))]
+    luck = float(np.any(streams, axis=0).mean())
+    report["results"][f"best of greedy_bayes over {len(patterns)} detection streams"] = {
+        "success_rate": luck, "per_stream": [float(s.mean()) for s in streams]}
+    print(f"{'best of greedy_bayes over streams':34s} success {100 * luck:5.1f} %  (per stream "
+          + ", ".join(f"{100 * s.mean():.1f}" for s in streams) + " %)")
+    write_report(args.out, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
