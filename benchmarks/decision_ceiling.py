@@ -27,8 +27,8 @@ at candidates at least that plausible), so that the room a learned skip decision
 best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distribution with that many decoys
 (``missions.generator.TASK_V1`` otherwise unchanged): a probe of task designs in which the skip decision matters.
 
-Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--decoys 1,4] [--thresholds 0.1,0.3]
-                                             [--no-patterns]
+Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--decoys 1,4] [--decoy-spread 2.5]
+                                             [--thresholds 0.1,0.3] [--no-patterns]
 """
 from __future__ import annotations
 
@@ -114,6 +114,8 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--split", default="val", choices=["train", "val", "test"])
     parser.add_argument("--decoys", default=None, help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
+    parser.add_argument("--decoy-spread", type=float, default=None,
+                        help="decoys' spread around the datum in datum sigmas (default: the task's, 2.5)")
     parser.add_argument("--thresholds", default="", help="comma-separated investigate_plausibility values to fly")
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
@@ -121,7 +123,9 @@ def main() -> int:
     generator = TASK_V1
     if args.decoys:
         low, high = (int(v) for v in args.decoys.split(","))
-        generator = dataclasses.replace(TASK_V1, decoys_min=low, decoys_max=high)
+        generator = dataclasses.replace(generator, decoys_min=low, decoys_max=high)
+    if args.decoy_spread is not None:
+        generator = dataclasses.replace(generator, decoy_spread_sigmas=args.decoy_spread)
     greedy = TUNED["greedy_bayes"]
     oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
     patterns = {
@@ -142,6 +146,7 @@ def main() -> int:
     }
     report = {"command": " ".join(["python benchmarks/decision_ceiling.py"] + sys.argv[1:]), "split": args.split,
               "episodes": args.episodes, "decoys": [generator.decoys_min, generator.decoys_max],
+              "decoy_spread_sigmas": generator.decoy_spread_sigmas,
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
     for name, make in {**patterns, **skips, **oracles}.items():
