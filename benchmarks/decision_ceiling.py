@@ -26,9 +26,11 @@ None of these is a searcher a crew could fly; they bound what deciding better co
 at candidates at least that plausible), so that the room a learned skip decision has is the oracle's line minus the
 best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distribution with that many decoys
 (``missions.generator.TASK_V1`` otherwise unchanged): a probe of task designs in which the skip decision matters.
+``--generator FILE`` starts from a generator config file instead (``hrlsac evaluate --generator``'s format, e.g.
+docs/results/large-area.yaml, the 2 km square).
 
-Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--decoys 1,4] [--decoy-spread 2.5]
-                                             [--thresholds 0.1,0.3] [--no-patterns]
+Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--generator FILE] [--decoys 1,4]
+                                             [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--no-patterns]
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ from common import results_file, write_report
 from missions.generator import TASK_V1
 from missions.mission import FlightSettings
 from missions.sweep_width import sweep_width_m
+from policies.cli.evaluate import read_generator_config
 from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, ParallelTrack
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -113,6 +116,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--generator", default=None, help="generator config file (YAML) instead of the task's")
     parser.add_argument("--decoys", default=None, help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
     parser.add_argument("--decoy-spread", type=float, default=None,
                         help="decoys' spread around the datum in datum sigmas (default: the task's, 2.5)")
@@ -120,7 +124,7 @@ def main() -> int:
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
     args = parser.parse_args()
-    generator = TASK_V1
+    generator = read_generator_config(args.generator) if args.generator else TASK_V1
     if args.decoys:
         low, high = (int(v) for v in args.decoys.split(","))
         generator = dataclasses.replace(generator, decoys_min=low, decoys_max=high)
@@ -145,7 +149,8 @@ def main() -> int:
         "victim known": lambda core: KnownVictim(core, greedy),
     }
     report = {"command": " ".join(["python benchmarks/decision_ceiling.py"] + sys.argv[1:]), "split": args.split,
-              "episodes": args.episodes, "decoys": [generator.decoys_min, generator.decoys_max],
+              "episodes": args.episodes, "generator_file": args.generator,
+              "decoys": [generator.decoys_min, generator.decoys_max],
               "decoy_spread_sigmas": generator.decoy_spread_sigmas,
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
