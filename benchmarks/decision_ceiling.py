@@ -13,7 +13,8 @@ tuned greedy Bayes searcher (``policies.env.baselines``, ``TUNED["greedy_bayes"]
   with the same detection draws: an upper bound on choosing among those whole strategies scenario by scenario
   (inflated by luck: a scenario one of them found by a fortunate draw counts too);
 * **best of greedy Bayes over as many detection streams**: the same union over greedy Bayes alone, flown once per
-  detection stream (the same scenarios, other draws): how much of the line above is luck.
+  detection stream (the same scenarios, other draws): how much of the line above is luck. With ``--taus`` the
+  patterns are greedy Bayes with each of those travel-time constants instead (tau: how far a better cell may lie).
 
 For greedy Bayes itself the report splits its failures into sorties that never sighted the victim and sorties that
 sighted it but did not confirm and reach it, and gives its success by how far the victim lay from the datum; and
@@ -30,7 +31,8 @@ best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distr
 docs/results/large-area.yaml, the 2 km square).
 
 Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--generator FILE] [--decoys 1,4]
-                                             [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--no-patterns]
+                                             [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--taus 3,10,30,100,300]
+                                             [--no-patterns]
 """
 from __future__ import annotations
 
@@ -121,6 +123,8 @@ def main() -> int:
     parser.add_argument("--decoy-spread", type=float, default=None,
                         help="decoys' spread around the datum in datum sigmas (default: the task's, 2.5)")
     parser.add_argument("--thresholds", default="", help="comma-separated investigate_plausibility values to fly")
+    parser.add_argument("--taus", default="", help="comma-separated travel-time constants: the patterns become greedy "
+                        "Bayes with each (the best-of line then bounds choosing tau per scenario)")
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
     args = parser.parse_args()
@@ -139,6 +143,11 @@ def main() -> int:
         "expanding_square": lambda core: ExpandingSquare(core, TUNED["expanding_square"]),
         "parallel_track": lambda core: ParallelTrack(core, TUNED["parallel_track"]),
     }
+    if args.taus:
+        patterns = {"greedy_bayes": patterns["greedy_bayes"]}
+        patterns.update({f"greedy_bayes, travel_time_s {tau:g}":
+                         functools.partial(GreedyBayes, settings=dataclasses.replace(greedy, travel_time_s=tau))
+                         for tau in (float(v) for v in args.taus.split(",")) if tau != greedy.travel_time_s})
     if args.no_patterns:
         patterns = {"greedy_bayes": patterns["greedy_bayes"]}
     skips = {f"greedy_bayes, investigate_plausibility {value:g}":
