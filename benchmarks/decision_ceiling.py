@@ -4,8 +4,9 @@ A learned meta-controller can beat the best scripted searcher only by deciding b
 measures, on the same scenarios and detection draws, what perfect versions of each decision would be worth to the
 tuned greedy Bayes searcher (``policies.env.baselines``, ``TUNED["greedy_bayes"]``):
 
-* **oracle skip**: which candidate is the victim is known, so no decoy is ever looked at (the victim still needs its
-  close look to be confirmed): the ceiling of confirm-or-skip decisions, however they are made;
+* **oracle skip**: which candidate is the victim is known, so the drone never flies to a decoy for a close look (one
+  beside the victim may still be identified in passing during the victim's own; the victim still needs its close
+  look to be confirmed): the ceiling of confirm-or-skip decisions, however they are made;
 * **victim known**: the drone flies straight at the victim from the start, and looks at it: the ceiling of the
   task itself with this airframe, camera and endurance (what search leaves undone);
 * **best of the patterns per scenario**: a scenario counts as found when any of several tuned scripted searchers
@@ -54,7 +55,7 @@ from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
 class TruthfulPlausibility:
     """The search batch as the searcher sees it, except that ``plausibility`` is 1 for the victim's track and 0 for
-    every decoy's (with ``investigate_plausibility`` 0.5, only the victim is ever looked at)."""
+    every decoy's (with ``investigate_plausibility`` 0.5, only the victim is ever flown to for a close look)."""
 
     def __init__(self, core):
         self._core = core
@@ -78,7 +79,9 @@ class KnownVictim(GreedyBayes):
         return core.targets[np.arange(core.n), core.scen.primary_index]
 
 
-def fly(make, split: str, episodes: int, stream: int = 0, generator=TASK_V1) -> dict:
+def fly(make, split: str, episodes: int, stream: int = 0, generator=TASK_V1) -> tuple[dict, object]:
+    """The metrics of ``make(core)``'s searcher over the first ``episodes`` scenarios of ``split`` (detection stream
+    ``stream``), and the scenarios flown."""
     flight = FlightSettings()
     targets = 1 + generator.max_distractors + generator.decoys_max
     core = episode_batch(split, episodes, flight, goal_conditioned=False, stream=stream, task="SarSearch-v1",
