@@ -106,6 +106,23 @@ def failure_split(metrics: dict, scen) -> dict:
             "failed_sighted": float((~success & sighted).mean()), "success_by_victim_offset": bands}
 
 
+def decoy_range(text: str) -> tuple[int, int]:
+    """``--decoys MIN,MAX`` as two integers, or a one-line argparse error."""
+    try:
+        low, high = (int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX (two integers, e.g. 8,16), got {text!r}") from None
+    return low, high
+
+
+def numbers(text: str) -> list[float]:
+    """A comma-separated list of numbers (``--thresholds``, ``--taus``), or a one-line argparse error."""
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
 def sweep_rates(flight: FlightSettings) -> dict[str, float]:
     """Sweep width x speed (m^2/s) of a 0.5 m object in clear conditions, by 'zoom z, v m/s'."""
     rates = {}
@@ -122,21 +139,24 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--split", default="val", choices=["train", "val", "test"])
     parser.add_argument("--generator", default=None, help="generator config file (YAML) instead of the task's")
-    parser.add_argument("--decoys", default=None, help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
+    parser.add_argument("--decoys", type=decoy_range, default=None,
+                        help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
     parser.add_argument("--decoy-spread", type=float, default=None,
                         help="decoys' spread around the datum in datum sigmas (default: the task's, 2.5)")
-    parser.add_argument("--thresholds", default="", help="comma-separated investigate_plausibility values to fly")
-    parser.add_argument("--taus", default="", help="comma-separated travel-time constants: the patterns become greedy "
+    parser.add_argument("--thresholds", type=numbers, default=[], help="comma-separated investigate_plausibility values to fly")
+    parser.add_argument("--taus", type=numbers, default=[], help="comma-separated travel-time constants: the patterns become greedy "
                         "Bayes with each (the best-of line then bounds choosing tau per scenario)")
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
     args = parser.parse_args()
-    generator = read_generator_config(args.generator) if args.generator else TASK_V1
-    if args.decoys:
-        low, high = (int(v) for v in args.decoys.split(","))
-        generator = dataclasses.replace(generator, decoys_min=low, decoys_max=high)
-    if args.decoy_spread is not None:
-        generator = dataclasses.replace(generator, decoy_spread_sigmas=args.decoy_spread)
+    try:
+        generator = read_generator_config(args.generator) if args.generator else TASK_V1
+        if args.decoys:
+            generator = dataclasses.replace(generator, decoys_min=args.decoys[0], decoys_max=args.decoys[1])
+        if args.decoy_spread is not None:
+            generator = dataclasses.replace(generator, decoy_spread_sigmas=args.decoy_spread)
+    except ValueError as exc:
+        parser.error(str(exc))
     greedy = TUNED["greedy_bayes"]
     oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
     patterns = {
@@ -150,12 +170,12 @@ def main() -> int:
         patterns = {"greedy_bayes": patterns["greedy_bayes"]}
         patterns.update({f"greedy_bayes, travel_time_s {tau:g}":
                          functools.partial(GreedyBayes, settings=dataclasses.replace(greedy, travel_time_s=tau))
-                         for tau in (float(v) for v in args.taus.split(",")) if tau != greedy.travel_time_s})
+                         for tau in args.taus if tau != greedy.travel_time_s})
     if args.no_patterns:
         patterns = {"greedy_bayes": patterns["greedy_bayes"]}
     skips = {f"greedy_bayes, investigate_plausibility {value:g}":
              functools.partial(GreedyBayes, settings=dataclasses.replace(greedy, investigate_plausibility=value))
-             for value in (float(v) for v in args.thresholds.split(",") if v.strip())}
+             for value in args.thresholds}
     oracles = {
         "greedy_bayes, oracle skip": lambda core: GreedyBayes(TruthfulPlausibility(core), oracle_skip),
         "victim known": lambda core: KnownVictim(core, greedy),
