@@ -19,7 +19,7 @@ tuned greedy Bayes searcher (``policies.env.baselines``, ``TUNED["greedy_bayes"]
 
 For greedy Bayes itself the report splits its failures into sorties that never sighted the victim and sorties that
 sighted it but did not confirm and reach it, and gives its success by how far the victim lay from the datum; and
-the camera model's sweep rate (effective sweep width x speed, a 0.5 m object in clear conditions at the search
+the camera model's sweep rate (effective sweep width x speed, a person in clear conditions at the search
 altitude) at the speeds and zooms a transit could fly, to check that greedy Bayes' transit (full speed, widest zoom)
 already searches fastest.
 
@@ -45,8 +45,11 @@ import sys
 import numpy as np
 from common import results_file, write_report
 
+from missions.belief_search import TARGET_SLOTS
 from missions.generator import TASK_V1
 from missions.mission import FlightSettings
+from missions.scenario import CATEGORIES
+from missions.search import OBJECT_SIZE_M
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
 from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, ParallelTrack
@@ -79,13 +82,13 @@ class KnownVictim(GreedyBayes):
         return core.targets[np.arange(core.n), core.scen.primary_index]
 
 
-def fly(make, split: str, episodes: int, stream: int = 0, generator=TASK_V1) -> tuple[dict, object]:
-    """The metrics of ``make(core)``'s searcher over the first ``episodes`` scenarios of ``split`` (detection stream
-    ``stream``), and the scenarios flown."""
+def fly_scripted(make, split: str, episodes: int, stream: int = 0, generator=TASK_V1) -> tuple[dict, object]:
+    """The metrics of ``make(core)``'s scripted searcher over the first ``episodes`` SarSearch-v1 scenarios of
+    ``split`` drawn from ``generator`` (detection stream ``stream``), and the scenarios flown."""
     flight = FlightSettings()
     targets = 1 + generator.max_distractors + generator.decoys_max
     core = episode_batch(split, episodes, flight, goal_conditioned=False, stream=stream, task="SarSearch-v1",
-                         generator=generator, max_targets=max(targets, 16))
+                         generator=generator, max_targets=max(targets, TARGET_SLOTS))
     searcher = make(core)
     return summarise(run_episodes(core, lambda _core: searcher.act()), flight.step_period_s), core.scen
 
@@ -124,12 +127,13 @@ def numbers(text: str) -> list[float]:
 
 
 def sweep_rates(flight: FlightSettings) -> dict[str, float]:
-    """Sweep width x speed (m^2/s) of a 0.5 m object in clear conditions, by 'zoom z, v m/s'."""
+    """Sweep width x speed (m^2/s) of a person (``OBJECT_SIZE_M``) in clear conditions, by 'zoom z, v m/s'."""
+    size = np.array([OBJECT_SIZE_M[CATEGORIES.index("person")]])
     rates = {}
     for zoom in (0.0, 0.25, 0.5, 1.0):
         for fraction in (0.4, 0.6, 0.8, 1.0):
             speed = fraction * flight.max_speed_mps
-            width = sweep_width_m(flight.altitude_m, zoom, speed, flight.step_period_s, np.array([0.5]), np.array([1.0]))
+            width = sweep_width_m(flight.altitude_m, zoom, speed, flight.step_period_s, size, np.array([1.0]))
             rates[f"zoom {zoom:g}, {speed:g} m/s"] = float(speed * width[0])
     return rates
 
@@ -187,7 +191,7 @@ def main() -> int:
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
     for name, make in {**patterns, **skips, **oracles}.items():
-        metrics, scen = fly(make, args.split, args.episodes, generator=generator)
+        metrics, scen = fly_scripted(make, args.split, args.episodes, generator=generator)
         success = np.array(metrics["per_episode"]["success"], dtype=bool)
         if name in patterns:
             found.append(success)
@@ -203,7 +207,7 @@ def main() -> int:
     best_of = float(np.any(found, axis=0).mean())
     report["results"]["best of the patterns per scenario"] = {"success_rate": best_of, "of": list(patterns)}
     print(f"{'best of the patterns per scenario':34s} success {100 * best_of:5.1f} %")
-    streams = [found[0]] + [np.array(fly(patterns["greedy_bayes"], args.split, args.episodes, stream, generator)[0]
+    streams = [found[0]] + [np.array(fly_scripted(patterns["greedy_bayes"], args.split, args.episodes, stream, generator)[0]
                                      ["per_episode"]["success"], dtype=bool) for stream in range(1, len(patterns))]
     luck = float(np.any(streams, axis=0).mean())
     report["results"][f"best of greedy_bayes over {len(patterns)} detection streams"] = {

@@ -20,11 +20,10 @@ import sys
 
 import numpy as np
 from common import results_file, write_report
+from decision_ceiling import fly_scripted
 
 from missions import goals as goal_logic
-from missions.mission import FlightSettings
 from policies.env.baselines import TUNED, GreedyBayes, ScriptedSearch
-from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
 
 class GoalPointSearch(ScriptedSearch):
@@ -54,10 +53,7 @@ class GoalPointSearch(ScriptedSearch):
 
 
 def fly(make, split: str, episodes: int) -> dict:
-    flight = FlightSettings()
-    core = episode_batch(split, episodes, flight, goal_conditioned=False, task="SarSearch-v1")
-    searcher = make(core)
-    metrics = summarise(run_episodes(core, lambda _core: searcher.act()), flight.step_period_s)
+    metrics, _ = fly_scripted(make, split, episodes)
     return {key: metrics[key] for key in ("success_rate", "ran_dry_rate", "returned_rate", "collision_rate")}
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from decision_ceiling import KnownVictim, TruthfulPlausibility, fly  # noqa: E402
+from decision_ceiling import KnownVictim, TruthfulPlausibility, fly_scripted  # noqa: E402
 
 from missions.belief_search import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
@@ -55,8 +55,8 @@ def test_the_oracle_skip_never_looks_at_a_decoy_where_greedy_bayes_does():
     plain, plain_seen = decoy_looks(lambda core: GreedyBayes(core, greedy))
     oracle, oracle_seen = decoy_looks(lambda core: GreedyBayes(TruthfulPlausibility(core),
                                                              dataclasses.replace(greedy, investigate_plausibility=0.5)))
-    plain_metrics, _ = fly(plain, "val", EPISODES, generator=MANY_DECOYS)
-    oracle_metrics, _ = fly(oracle, "val", EPISODES, generator=MANY_DECOYS)
+    plain_metrics, _ = fly_scripted(plain, "val", EPISODES, generator=MANY_DECOYS)
+    oracle_metrics, _ = fly_scripted(oracle, "val", EPISODES, generator=MANY_DECOYS)
     assert plain_seen["looked"].sum() >= EPISODES // 4  # greedy Bayes looks at decoys in many of these searches
     assert not oracle_seen["looked"].any()
     # the victim is still confirmed by a close look before it counts: the oracle succeeds, and not by luck alone
@@ -66,8 +66,8 @@ def test_the_oracle_skip_never_looks_at_a_decoy_where_greedy_bayes_does():
 
 def test_knowing_the_victim_finds_it_where_greedy_bayes_does_not():
     greedy = TUNED["greedy_bayes"]
-    plain_metrics, _ = fly(lambda core: GreedyBayes(core, greedy), "val", EPISODES)
-    known_metrics, _ = fly(lambda core: KnownVictim(core, greedy), "val", EPISODES)
+    plain_metrics, _ = fly_scripted(lambda core: GreedyBayes(core, greedy), "val", EPISODES)
+    known_metrics, _ = fly_scripted(lambda core: KnownVictim(core, greedy), "val", EPISODES)
     plain = np.array(plain_metrics["per_episode"]["success"], dtype=bool)
     known = np.array(known_metrics["per_episode"]["success"], dtype=bool)
     assert known.mean() >= 0.95
