@@ -29,11 +29,14 @@ at candidates at least that plausible), so that the room a learned skip decision
 best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distribution with that many decoys
 (``missions.generator.TASK_V1`` otherwise unchanged): a probe of task designs in which the skip decision matters.
 ``--generator FILE`` starts from a generator config file instead (``hrlsac evaluate --generator``'s format, e.g.
-docs/results/large-area.yaml, the 2 km square).
+docs/results/large-area.yaml, the 2 km square). ``--identify-factor F`` makes a close look costlier (another task
+design probe): identification becomes detection at F times the object's size instead of
+``missions.belief_search.IDENTIFY_SIZE_FACTOR`` (1/6.4, Johnson's criteria), so a look hovers longer; the victim-known
+searcher's time to success shows what a look then costs.
 
 Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--generator FILE] [--decoys 1,4]
                                              [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--taus 3,10,30,100,300]
-                                             [--no-patterns]
+                                             [--identify-factor 0.03125] [--no-patterns]
 """
 from __future__ import annotations
 
@@ -45,6 +48,7 @@ import sys
 import numpy as np
 from common import results_file, write_report
 
+import missions.belief_search
 from missions.belief_search import TARGET_SLOTS
 from missions.generator import TASK_V1
 from missions.mission import FlightSettings
@@ -150,6 +154,9 @@ def main() -> int:
     parser.add_argument("--thresholds", type=numbers, default=[], help="comma-separated investigate_plausibility values to fly")
     parser.add_argument("--taus", type=numbers, default=[], help="comma-separated travel-time constants: the patterns become greedy "
                         "Bayes with each (the best-of line then bounds choosing tau per scenario)")
+    parser.add_argument("--identify-factor", type=float, default=None,
+                        help="identification is detection at this share of the object's size (default: the task's, "
+                        "1/6.4); smaller makes a close look longer")
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
     args = parser.parse_args()
@@ -161,6 +168,12 @@ def main() -> int:
             generator = dataclasses.replace(generator, decoy_spread_sigmas=args.decoy_spread)
     except ValueError as exc:
         parser.error(str(exc))
+    if args.identify_factor is not None:
+        if not 0.0 < args.identify_factor <= 1.0:
+            parser.error(f"--identify-factor must be in (0, 1] (the task's is 1/6.4), got {args.identify_factor}")
+        # A probe of task designs, not a setting of the task: the episodes run in this process, where the belief
+        # search reads the module's constant at every step.
+        missions.belief_search.IDENTIFY_SIZE_FACTOR = args.identify_factor
     greedy = TUNED["greedy_bayes"]
     oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
     patterns = {
@@ -188,6 +201,7 @@ def main() -> int:
               "episodes": args.episodes, "generator_file": args.generator,
               "decoys": [generator.decoys_min, generator.decoys_max],
               "decoy_spread_sigmas": generator.decoy_spread_sigmas,
+              "identify_size_factor": missions.belief_search.IDENTIFY_SIZE_FACTOR,
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
     for name, make in {**patterns, **skips, **oracles}.items():
