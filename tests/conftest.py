@@ -19,19 +19,6 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 import pytest  # noqa: E402
 
 
-LONGEST_FIRST = ("test_learning.py", "test_runner.py", "test_onboard_install.py", "test_pymavlink_udp_flight.py",
-                 "test_scaling.py", "test_mavproxy_flight.py", "test_mavsdk_flight.py")
-"""The test files that take longest (each 40-200 s on a 2-core machine; ``pytest --durations=60``), in that order."""
-
-
-def pytest_collection_modifyitems(session, config, items) -> None:
-    """Run the longest files first. ``make test`` hands whole files to the workers in collection order as they
-    free up (pytest-xdist ``--dist loadfile``); with a long file left for last, one worker finishes it alone while
-    the other idles. Longest first keeps their ends close. The order within a file is kept (a stable sort)."""
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
-
-
 PORT_RANGE = (20_000, 60_000)
 """UDP ports the tests take theirs from, split between the pytest-xdist workers."""
 _ports_handed_out = itertools.count()
