@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
@@ -75,3 +76,31 @@ def test_knowing_the_victim_finds_it_where_greedy_bayes_does_not():
     # and fast: straight there, against a search
     assert np.median(np.array(known_metrics["per_episode"]["length"])[known]) \
         < np.median(np.array(plain_metrics["per_episode"]["length"])[plain])
+
+
+def test_identify_factor_makes_every_close_look_longer_and_refuses_nonsense(tmp_path, monkeypatch, capsys):
+    """``--identify-factor`` (the costly-identification probe of docs/results) must reach the belief search: with
+    identification 20 times harder the searcher that knows the victim, whose only delay beyond the flight is its
+    close look, takes longer (median time to success); a factor outside (0, 1] is a one-line error."""
+    import json
+
+    import decision_ceiling
+    import missions.belief_search as belief_search
+
+    monkeypatch.setattr(belief_search, "IDENTIFY_SIZE_FACTOR", belief_search.IDENTIFY_SIZE_FACTOR)  # restored after
+    steps = {}
+    for factor in (None, 0.0078125):
+        out = tmp_path / f"{factor}.json"
+        argv = ["decision_ceiling.py", "--episodes", "12", "--no-patterns", "--out", str(out)]
+        monkeypatch.setattr(sys, "argv", argv + ([] if factor is None else ["--identify-factor", str(factor)]))
+        assert decision_ceiling.main() == 0
+        report = json.loads(out.read_text())
+        assert report["identify_size_factor"] == (factor or 1.0 / 6.4)
+        steps[factor] = report["results"]["victim known"]["steps_to_success"]["p50"]
+    assert steps[0.0078125] > steps[None] + 10  # a look of about 20 more seconds at the least
+
+    monkeypatch.setattr(sys, "argv", ["decision_ceiling.py", "--identify-factor", "0"])
+    with pytest.raises(SystemExit) as exit_info:
+        decision_ceiling.main()
+    assert exit_info.value.code == 2
+    assert "--identify-factor must be in (0, 1] (the task's is 1/6.4), got 0.0" in capsys.readouterr().err
