@@ -151,9 +151,11 @@ def main() -> int:
                         help="MIN,MAX decoys per scenario (default: the task's, 1,4)")
     parser.add_argument("--decoy-spread", type=float, default=None,
                         help="decoys' spread around the datum in datum sigmas (default: the task's, 2.5)")
-    parser.add_argument("--thresholds", type=numbers, default=[], help="comma-separated investigate_plausibility values to fly")
-    parser.add_argument("--taus", type=numbers, default=[], help="comma-separated travel-time constants: the patterns become greedy "
-                        "Bayes with each (the best-of line then bounds choosing tau per scenario)")
+    parser.add_argument("--thresholds", type=numbers, default=[],
+                        help="comma-separated investigate_plausibility values to fly")
+    parser.add_argument("--taus", type=numbers, default=[],
+                        help="comma-separated travel-time constants: the patterns become greedy Bayes with each (the "
+                        "best-of line then bounds choosing tau per scenario)")
     parser.add_argument("--identify-factor", type=float, default=None,
                         help="identification is detection at this share of the object's size (default: the task's, "
                         "1/6.4); smaller makes a close look longer")
@@ -221,8 +223,9 @@ def main() -> int:
     best_of = float(np.any(found, axis=0).mean())
     report["results"]["best of the patterns per scenario"] = {"success_rate": best_of, "of": list(patterns)}
     print(f"{'best of the patterns per scenario':34s} success {100 * best_of:5.1f} %")
-    streams = [found[0]] + [np.array(fly_scripted(patterns["greedy_bayes"], args.split, args.episodes, stream, generator)[0]
-                                     ["per_episode"]["success"], dtype=bool) for stream in range(1, len(patterns))]
+    others = (fly_scripted(patterns["greedy_bayes"], args.split, args.episodes, stream, generator)[0]
+              for stream in range(1, len(patterns)))
+    streams = [found[0]] + [np.array(metrics["per_episode"]["success"], dtype=bool) for metrics in others]
     luck = float(np.any(streams, axis=0).mean())
     report["results"][f"best of greedy_bayes over {len(patterns)} detection streams"] = {
         "success_rate": luck, "per_stream": [float(s.mean()) for s in streams]}

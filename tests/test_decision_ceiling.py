@@ -1,6 +1,7 @@
 """The oracles of ``benchmarks/decision_ceiling.py`` do what its figures rest on (docs/results/README.md, "What
 SarSearch-v1 leaves to a decision-maker"): the oracle skip never looks at a decoy while greedy Bayes does, on the same
-scenarios (a decoy beside the victim may still be identified in passing), and the searcher that knows the victim finds it in (almost) every scenario greedy Bayes finds and more."""
+scenarios (a decoy beside the victim may still be identified in passing); the searcher that knows the victim finds
+it in (almost) every scenario greedy Bayes finds and more; and ``--identify-factor`` reaches the belief search."""
 from __future__ import annotations
 
 import dataclasses
@@ -78,7 +79,7 @@ def test_knowing_the_victim_finds_it_where_greedy_bayes_does_not():
         < np.median(np.array(plain_metrics["per_episode"]["length"])[plain])
 
 
-def test_identify_factor_makes_every_close_look_longer_and_refuses_nonsense(tmp_path, monkeypatch, capsys):
+def test_identify_factor_makes_a_close_look_longer_and_refuses_nonsense(tmp_path, monkeypatch, capsys):
     """``--identify-factor`` (the costly-identification probe of docs/results) must reach the belief search: with
     identification 20 times harder the searcher that knows the victim, whose only delay beyond the flight is its
     close look, takes longer (median time to success); a factor outside (0, 1] is a one-line error."""
