@@ -1,13 +1,22 @@
-"""What every benchmark script shares: medians over repeated runs and an atomically written JSON report."""
+"""What every benchmark script shares: medians over repeated runs and an atomically written JSON report.
+
+Importing it puts this checkout's root first on ``sys.path``, so that a benchmark measures the code beside it: a
+virtual environment's editable install points at the checkout it was made from, and a benchmark run from another
+checkout (a git worktree) would otherwise import that one's packages. Import it before the project's packages.
+"""
 from __future__ import annotations
 
 import json
 import os
 import statistics
+import subprocess
 import sys
 import time
 
-RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+RESULTS_DIR = os.path.join(ROOT, "benchmarks", "results")
 
 
 def results_file(name: str) -> str:
@@ -26,10 +35,23 @@ def summarise(runs: dict[str, list[float]], title: str) -> dict[str, float]:
 
 def write_report(path: str, report: dict) -> None:
     """Write the report (plus the command and the time it was measured) to ``path`` atomically."""
-    report = {"command": "python " + " ".join(sys.argv), **report,
+    report = {"command": "python " + " ".join(sys.argv), **report, "code": code_version(),
               "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     with open(path + ".tmp", "w") as handle:
         json.dump(report, handle, indent=2)
     os.replace(path + ".tmp", path)
     print(f"written {path}")
+
+
+def code_version() -> str:
+    """The commit of the measured checkout, with "+changes" when its tracked files differ from it ("unknown"
+    outside a git checkout)."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                                timeout=10, check=True).stdout.strip()
+        changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                                 capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("+changes" if changed else "")

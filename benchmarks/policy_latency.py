@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from common import results_file, write_report  # first: it puts this checkout on sys.path
+
 from autonomy.observation import META_OBS_DIM
 from autonomy.policy import load_policy
 from policies.checkpoint import CheckpointPolicy
@@ -40,8 +42,6 @@ from policies.config import TrainConfig
 from policies.export.artifact import artifact_bytes, build_manifest
 from policies.export.module import policy_module
 from policies.export.parity import record_observations
-
-from common import results_file, write_report
 
 ARTIFACTS = {"torchscript": ("torchscript", "float32"), "torch-export": ("torch-export", "float32"),
              "torchscript-int8": ("torchscript", "int8")}

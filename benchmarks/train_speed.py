@@ -43,13 +43,13 @@ import time
 
 import torch
 
+from common import summarise, results_file, write_report  # first: it puts this checkout on sys.path
+
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.gym_env import SarSearchEnv
 from policies.env.core import SarSearchConfig
 from policies.evaluation.parallel import quick_evaluation
 from policies.training.trainer import Trainer
-
-from common import summarise, results_file, write_report
 
 PRESETS = {"default": (256, 256), "3x512": (512, 512, 512)}
 TARGETS = {"default": 1.5, "3x512": 1.1}

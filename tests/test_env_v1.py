@@ -191,6 +191,28 @@ def test_in_the_target_frame_the_constant_action_flies_straight_at_the_target():
         TrainConfig(action_frame="towards")
 
 
+def test_a_diagonal_command_flies_no_faster_than_the_runner_lets_it():
+    """(1, 1) asks for 14.1 m/s; the mission runner's setpoint stream caps the horizontal speed's norm at the
+    mission's max_speed_mps (autonomy.setpoints), so the environment must fly what flight flies: the capped speed,
+    in the commanded direction (before the fix its airframe flew the SITL's 12 m/s)."""
+    from autonomy.setpoints import SetpointStreamer, StreamConfig, VelocityCommand
+
+    flight = FlightSettings()
+    capped = SetpointStreamer(StreamConfig(max_horizontal_mps=flight.max_speed_mps), lambda *_: None).clamp(
+        VelocityCommand(flight.max_speed_mps, flight.max_speed_mps))
+    env = env_for()
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    start = core.position[0].copy()
+    speeds = []
+    for _ in range(15):
+        env.step(np.array([1.0, 1.0, 1.0, 0.0], dtype=np.float32))
+        speeds.append(float(np.hypot(core.vehicles.vn_mps[0], core.vehicles.ve_mps[0])))
+    assert max(speeds) <= np.hypot(capped.vn, capped.ve) + 1e-9 and max(speeds) > 0.99 * flight.max_speed_mps
+    travelled = core.position[0] - start
+    assert travelled[0] == pytest.approx(travelled[1], rel=1e-9)  # north-east, as commanded
+
+
 def test_in_the_arrive_frame_the_constant_action_stops_on_the_target_and_holds_there():
     """(1, 0) read in the arrive frame, flown by the environment's multirotor dynamics, reaches a point 300 m away at
     full speed, stops on it without passing it by more than a few metres and then holds over it below the close-look

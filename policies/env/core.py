@@ -82,7 +82,8 @@ class SarSearchConfig:
     goal one-hot is filled. Flat SAC mode (False): target = datum until the victim is detected, then the last
     detection; goal one-hot all zero."""
     airframe: dynamics.MultirotorParams | None = None
-    """Vehicle limits; None = the SITL's defaults with the speed limit raised to max_speed_mps if needed."""
+    """Vehicle limits; None = the SITL's defaults with the horizontal speed limit at ``flight.max_speed_mps``, where
+    the mission runner caps its setpoints (a velocity of norm above it flies at it, in its direction)."""
     generator: GeneratorConfig | None = None
     """The distribution generated scenarios come from; None = the task's (``GeneratorConfig()`` for v0,
     ``missions.generator.TASK_V1`` for v1). Ignored when ``scenarios`` is given."""
@@ -172,8 +173,10 @@ class FlownSearch:
 
     def _setup_vehicles(self, obs_dim: int) -> None:
         flight, n = self.config.flight, self.n
-        self.airframe = self.config.airframe or dynamics.MultirotorParams(
-            max_speed_xy_mps=max(flight.max_speed_mps, dynamics.MultirotorParams().max_speed_xy_mps))
+        # The speed the mission runner's setpoints are capped at (autonomy.setpoints: the horizontal speed's norm
+        # at the mission's max_speed_mps, as PX4's position controller caps it at MPC_XY_VEL_MAX): a command flight
+        # would cap is capped here too (the SITL's own 12 m/s would let a diagonal command fly 12 m/s).
+        self.airframe = self.config.airframe or dynamics.MultirotorParams(max_speed_xy_mps=flight.max_speed_mps)
         self.wind = dynamics.Wind()  # the velocity controller holds the track; wind acts through drift
         hover = dynamics.VehicleState(down_m=-flight.altitude_m, on_ground=False)
         self.vehicles = dynamics.BatchState.from_states([hover] * n)
