@@ -266,13 +266,18 @@ class TrainConfig:
     meta-controller of the joint phase), instead of the last one. Model selection on the val split (as
     Stable-Baselines3's EvalCallback keeps its best model), so the test split stays untouched; it needs
     ``eval_every`` > 0, and it judges best with ``eval_episodes`` episodes (use a few hundred)."""
+    keep_best: bool = False
+    """Flat SAC: the run ends with the policy (its actor and the observation normaliser it was trained with) of
+    the quick evaluation that scored best over the whole run, by ``meta_keep_best``'s rule (and its ran-dry limit),
+    instead of the last one: the model selection on val that HRL-SAC's meta-controller gets, for a fair
+    comparison. Training itself is unchanged; it needs ``eval_every`` > 0. HRL-SAC uses ``meta_keep_best``."""
     eval_flight_rules: bool = False
-    """Quick evaluations (and so ``meta_keep_best``) fly with the mission runner's rules instead of training's: a
+    """Quick evaluations (and so ``meta_keep_best`` and ``keep_best``) fly with the mission runner's rules instead of training's: a
     ReturnToBase decision ends the search and so does the pilot's bingo failsafe (SarSearch-v1;
     ``hrlsac evaluate --flight-rules``). The meta-controller is then chosen by the success it would have in flight,
     where running dry cannot happen, instead of by a trade of success against sorties that ran dry."""
     meta_keep_best_max_ran_dry: float = 1.0
-    """With ``meta_keep_best``: only evaluations in which at most this share of the sorties ran dry compete on
+    """With ``meta_keep_best`` or ``keep_best``: only evaluations in which at most this share of the sorties ran dry compete on
     success (while none qualifies, the one with the fewest wins), the rule the scripted searchers are tuned with
     (``benchmarks/tune_baselines.py``, 0.01). 1 = success alone. Choosing on success alone picks a meta-controller
     that never sends the drone home: coming home in time can only end a search sooner."""
@@ -327,6 +332,10 @@ class TrainConfig:
             raise ValueError("TrainConfig.meta_keep_best needs a meta-only phase and quick evaluations to choose "
                              f"from: set meta_only_steps and eval_every above 0 (got {self.meta_only_steps} and "
                              f"{self.eval_every})")
+        if self.keep_best and (self.algo != "sac" or self.eval_every <= 0):
+            raise ValueError("TrainConfig.keep_best is the flat SAC's and chooses among quick evaluations: use it with "
+                             f"algo 'sac' and eval_every above 0 (got {self.algo!r} and {self.eval_every}); "
+                             "HRL-SAC keeps its best meta-controller with meta_keep_best")
         if self.meta_only_steps >= self.total_steps:
             raise ValueError(f"TrainConfig.meta_only_steps ({self.meta_only_steps:,}) must be below total_steps "
                              f"({self.total_steps:,}): the low level has to learn before the meta-controller "

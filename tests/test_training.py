@@ -397,7 +397,7 @@ def test_the_meta_only_phase_resumes_exactly(tmp_path):
         assert torch.equal(a, b)
     for a, b in zip(uninterrupted.meta.actor.state_dict().values(), resumed.meta.actor.state_dict().values()):
         assert torch.equal(a, b)
-    assert uninterrupted.best_meta["step"] == resumed.best_meta["step"]
+    assert uninterrupted.best["step"] == resumed.best["step"]
     assert log_rows(tmp_path / "a" / "progress.csv") == log_rows(tmp_path / "b" / "progress.csv")
 
 
@@ -456,7 +456,7 @@ def test_meta_keep_best_ends_with_the_meta_controller_of_the_best_evaluation(tmp
     trainer = Trainer(config, tmp_path, evaluate=scripted_evaluation)
     trainer.run(progress=False)
     assert sorted(actors) == list(range(100, 1_700, 100))
-    assert trainer.best_meta["step"] == 1_100 and trainer.best_meta["success"] == 0.75
+    assert trainer.best["step"] == 1_100 and trainer.best["success"] == 0.75
     assert not all(torch.equal(actors[1_100][k], actors[1_600][k]) for k in actors[1_100])  # the phase learned
     policy = CheckpointPolicy.load(tmp_path)  # the run, and its checkpoint, end with step 1,100's
     for actor in (trainer.meta.actor.state_dict(), policy.meta.actor.state_dict()):
@@ -486,10 +486,50 @@ def test_meta_keep_best_with_a_ran_dry_limit_prefers_the_safe_meta_controller(tm
 
     trainer._better = watched
     trainer.run(progress=False)
-    assert trainer.best_meta["step"] == 1_400 and trainer.best_meta["ran_dry"] == 0.01
+    assert trainer.best["step"] == 1_400 and trainer.best["ran_dry"] == 0.01
     assert (1_300, True) in kept and (1_500, False) in kept
     with pytest.raises(ValueError, match=r"meta_keep_best_max_ran_dry must be a number in \[0, 1\]"):
         small_config("hrl-sac", meta_keep_best_max_ran_dry=1.5)
+
+
+def test_keep_best_ends_a_flat_run_with_the_policy_and_normaliser_of_the_best_evaluation(tmp_path):
+    """keep_best (flat SAC): scripted scores make step 300 the best and step 700 only tie with it, so the run and
+    its checkpoint end with step 300's actor and the normaliser its inputs had then; the critics, which do not act,
+    are the last ones, as in a run without keep_best."""
+    scripted = {300: 0.75, 700: 0.75}
+    seen = {}
+
+    def scripted_evaluation(policy):
+        seen[policy.step] = ({k: v.clone() for k, v in policy.low.actor.state_dict().items()},
+                             policy.normalizer.state_dict())
+        return scripted.get(policy.step, 0.25)
+
+    plain = Trainer(small_config("sac"), tmp_path / "plain")
+    plain.run(progress=False)
+    trainer = Trainer(small_config("sac", keep_best=True, eval_every=100, eval_episodes=4), tmp_path / "best",
+                      evaluate=scripted_evaluation)
+    trainer.run(progress=False)
+    assert sorted(seen) == list(range(100, 900, 100))
+    assert trainer.best["step"] == 300 and trainer.best["success"] == 0.75
+    actor_300, normaliser_300 = seen[300]
+    assert not all(torch.equal(actor_300[k], seen[800][0][k]) for k in actor_300)  # it learned after step 300
+    assert not np.array_equal(normaliser_300["mean"], seen[800][1]["mean"])
+    policy = CheckpointPolicy.load(tmp_path / "best")
+    for actor in (trainer.low.actor.state_dict(), policy.low.actor.state_dict()):
+        assert all(torch.equal(actor[k], actor_300[k]) for k in actor)
+    np.testing.assert_array_equal(policy.normalizer.state_dict()["mean"], normaliser_300["mean"])
+    np.testing.assert_array_equal(policy.normalizer.state_dict()["var"], normaliser_300["var"])
+    for a, b in zip(plain.low.critic.state_dict().values(), trainer.low.critic.state_dict().values()):
+        assert torch.equal(a, b)  # choosing is all it changes
+
+
+def test_keep_best_is_the_flat_sacs_and_needs_quick_evaluations():
+    with pytest.raises(ValueError, match=r"keep_best is the flat SAC's .*\(got 'hrl-sac' and 100\).*meta_keep_best"):
+        small_config("hrl-sac", keep_best=True, eval_every=100)
+    with pytest.raises(ValueError, match=r"keep_best .* eval_every above 0 \(got 'sac' and 0\)"):
+        small_config("sac", keep_best=True, eval_every=0)
+    with pytest.raises(ValueError, match=r"TrainConfig.keep_best chooses by quick evaluations: give the Trainer"):
+        Trainer(small_config("sac", keep_best=True, eval_every=100), "unused-run-dir")
 
 
 def test_random_goals_go_home_from_the_bingo_call_on(tmp_path):

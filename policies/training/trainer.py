@@ -70,8 +70,9 @@ class Trainer:
 
     def __init__(self, config: TrainConfig, run_dir: Path | str, resume: bool = False,
                  evaluate: Callable[[CheckpointPolicy], dict[str, float] | float] | None = None):
-        if config.meta_keep_best and evaluate is None:
-            raise ValueError("TrainConfig.meta_keep_best chooses by quick evaluations: give the Trainer an evaluate "
+        if (config.meta_keep_best or config.keep_best) and evaluate is None:
+            name = "meta_keep_best" if config.meta_keep_best else "keep_best"
+            raise ValueError(f"TrainConfig.{name} chooses by quick evaluations: give the Trainer an evaluate "
                              "function (policies.evaluation.parallel.quick_evaluation)")
         self.run_dir = Path(run_dir)
         self.evaluate = evaluate
@@ -112,7 +113,9 @@ class Trainer:
         self.recent: deque = deque(maxlen=WINDOW)  # (success, return, length, coverage) of finished episodes
         self.recent_subgoals: deque = deque(maxlen=10 * WINDOW)  # 1 if a sub-goal point was reached in time
         self.metrics: dict[str, float] = {}
-        self.best_meta: dict | None = None  # meta_keep_best: {"success", "ran_dry", "step", "actor"} of the best
+        # meta_keep_best / keep_best: {"success", "ran_dry", "step", "actor"} of the best quick evaluation so far
+        # (keep_best also its "normalizer": the flat actor was trained on observations normalised by it)
+        self.best: dict | None = None
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if resume:
             self._load(self.run_dir / CHECKPOINT)
@@ -278,14 +281,15 @@ class Trainer:
                 if self.step // cfg.checkpoint_every > last_checkpoint:
                     last_checkpoint = self.step // cfg.checkpoint_every
                     self.save()
-        if self.step >= cfg.total_steps and self.best_meta is not None:
-            self.meta.actor.load_state_dict(self.best_meta["actor"])  # meta_keep_best: the run ends with it
+        if self.step >= cfg.total_steps and self.best is not None:
+            self._restore_best()  # meta_keep_best / keep_best: the run ends with the best policy
         path = self.save()
         if progress:
             print(file=sys.stderr)
-            if self.best_meta is not None and self.step >= cfg.total_steps:
-                print(f"kept the meta-controller of step {self.best_meta['step']:,} (val success "
-                      f"{self.best_meta['success']:.1%}, ran dry {self.best_meta.get('ran_dry', 0.0):.1%}, on "
+            if self.best is not None and self.step >= cfg.total_steps:
+                kept = "meta-controller" if self.hrl else "policy"
+                print(f"kept the {kept} of step {self.best['step']:,} (val success "
+                      f"{self.best['success']:.1%}, ran dry {self.best.get('ran_dry', 0.0):.1%}, on "
                       f"{cfg.eval_episodes} episodes)", file=sys.stderr)
         log.close()
         return path
@@ -294,7 +298,8 @@ class Trainer:
         """Success rate of the deterministic policy as it stands, as measured by the ``evaluate`` function the
         trainer was given (``policies.evaluation.parallel.quick_evaluation``: the first ``eval_episodes`` val
         scenarios), logged as ``eval_success_rate`` (and ``eval_ran_dry_rate``); with ``meta_keep_best``, in the
-        meta-only phase, remembers the meta-controller of the best one (:meth:`_better`). The evaluation must use
+        meta-only phase, remembers the meta-controller of the best one (:meth:`_better`), with ``keep_best`` the
+        flat SAC's actor and observation normaliser. The evaluation must use
         no random generator of the run, so that training goes on exactly as without it."""
         cfg = self.config
         policy = CheckpointPolicy(cfg, self.normalizer, self.low, self.meta, self.step, self.run_dir)
@@ -303,23 +308,35 @@ class Trainer:
         success, ran_dry = float(scores["success_rate"]), float(scores.get("ran_dry_rate", 0.0))
         self.metrics["eval_success_rate"] = success
         self.metrics["eval_ran_dry_rate"] = ran_dry if "ran_dry_rate" in scores else math.nan
-        if cfg.meta_keep_best and self.low_level_frozen and self._better(success, ran_dry):
-            actor = {key: value.clone() for key, value in self.meta.actor.state_dict().items()}
-            self.best_meta = {"success": success, "ran_dry": ran_dry, "step": self.step, "actor": actor}
+        candidate = (cfg.meta_keep_best and self.low_level_frozen) or cfg.keep_best
+        if candidate and self._better(success, ran_dry):
+            acting = self.meta.actor if self.hrl else self.low.actor
+            actor = {key: value.clone() for key, value in acting.state_dict().items()}
+            self.best = {"success": success, "ran_dry": ran_dry, "step": self.step, "actor": actor}
+            if not self.hrl:
+                self.best["normalizer"] = self.normalizer.state_dict()
         return success
+
+    def _restore_best(self) -> None:
+        """Load the acting network of the best quick evaluation (and, flat, the normaliser its inputs had)."""
+        if self.hrl:
+            self.meta.actor.load_state_dict(self.best["actor"])
+        else:
+            self.low.actor.load_state_dict(self.best["actor"])
+            self.normalizer.load_state_dict(self.best["normalizer"])
 
     def _better(self, success: float, ran_dry: float) -> bool:
         """Whether an evaluation beats the best so far, by the rule the scripted searchers are tuned with: the
         highest success among those that ran dry in at most ``meta_keep_best_max_ran_dry`` of the episodes, and
         while none does, the fewest that ran dry (ties: the earlier evaluation stays)."""
-        if self.best_meta is None:
+        if self.best is None:
             return True
         limit = self.config.meta_keep_best_max_ran_dry
 
         def score(s: float, r: float) -> tuple[float, float]:
             return (s, 0.0) if r <= limit else (-1.0, -r)
 
-        return score(success, ran_dry) > score(self.best_meta["success"], self.best_meta.get("ran_dry", 0.0))
+        return score(success, ran_dry) > score(self.best["success"], self.best.get("ran_dry", 0.0))
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
@@ -334,7 +351,7 @@ class Trainer:
                         self.segment_steps.copy(), self.segment_reached.copy()],
             "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(), "episodes": self.episodes,
             "recent": list(self.recent), "recent_subgoals": list(self.recent_subgoals), "metrics": dict(self.metrics),
-            "best_meta": self.best_meta, "n_step": self.n_step.pending if self.n_step else None,
+            "best_meta": self.best, "n_step": self.n_step.pending if self.n_step else None,
         }
 
     def save(self) -> Path:
@@ -363,7 +380,7 @@ class Trainer:
         self.recent.extend(state["recent"])
         self.recent_subgoals.extend(state["recent_subgoals"])
         self.metrics = dict(state["metrics"])
-        self.best_meta = state.get("best_meta")  # checkpoints from before meta_keep_best have none
+        self.best = state.get("best_meta")  # (the key predates keep_best; checkpoints before meta_keep_best lack it)
         if self.n_step is not None:
             self.n_step.pending = state["n_step"]
         truncate_after(self.run_dir, self.step)
