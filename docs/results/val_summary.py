@@ -1,11 +1,13 @@
-"""Summarise sweeps' val evaluations (500 scenarios): per seed the success under the environment's and the mission
+"""Summarise sweeps' evaluations on a split (val: 500 scenarios, test: 1,000): per seed the success under the environment's and the mission
 runner's rules and the share that ran dry; for HRL-SAC also the sub-goal reachability, TrackObject at every
 decision and the scenarios only one of the two won; the means over seeds with their t 95 % intervals.
 
-Each run needs ``hrlsac evaluate RUN --split val --episodes 500`` with and without ``--flight-rules`` (the default
-file names), and HRL-SAC runs also ``--constant-goal TrackObject --out RUN/eval_val_track.json``.
+Each run needs ``hrlsac evaluate RUN --split SPLIT --episodes N`` with and without ``--flight-rules`` (the default
+file names), and HRL-SAC runs also ``--constant-goal TrackObject`` (``RUN/eval_SPLIT_goal-TrackObject.json``; on
+val the earlier ``--out RUN/eval_val_track.json`` is read too). The learned - TrackObject difference is paired:
+the same scenarios and detection draws.
 
-Usage: python docs/results/val_summary.py SWEEP_DIR [SWEEP_DIR ...] [--out FILE.json]
+Usage: python docs/results/val_summary.py SWEEP_DIR [SWEEP_DIR ...] [--split val|test] [--out FILE.json]
 """
 from __future__ import annotations
 
@@ -27,41 +29,44 @@ def mean_t95(values: list[float]) -> list[float]:
     return [round(m, 4), round(m - half, 4), round(m + half, 4)]
 
 
-def run_row(run: pathlib.Path) -> dict:
-    env = json.loads((run / "eval_val.json").read_text())
-    flight = json.loads((run / "eval_val_flight.json").read_text())
-    row = {"val_success": env["success_rate"], "val_ran_dry": env["ran_dry_rate"],
-           "val_success_runner_rules": flight["success_rate"]}
-    track_file = run / "eval_val_track.json"
-    if track_file.exists():
+def run_row(run: pathlib.Path, split: str) -> dict:
+    env = json.loads((run / f"eval_{split}.json").read_text())
+    flight = json.loads((run / f"eval_{split}_flight.json").read_text())
+    row = {"success": env["success_rate"], "ran_dry": env["ran_dry_rate"],
+           "success_runner_rules": flight["success_rate"]}
+    track_files = [run / f"eval_{split}_goal-TrackObject.json", run / f"eval_{split}_track.json"]
+    track_file = next((f for f in track_files if f.exists()), None)
+    if track_file is not None:
         track = json.loads(track_file.read_text())
         learned, always = env["per_episode"]["success"], track["per_episode"]["success"]
-        row.update(val_subgoal_reachability=round(env["subgoal_reachability"], 4),
-                   val_success_always_track_object=track["success_rate"],
+        row.update(subgoal_reachability=round(env["subgoal_reachability"], 4),
+                   success_always_track_object=track["success_rate"],
                    learned_only=sum(a and not b for a, b in zip(learned, always)),
                    track_object_only=sum(b and not a for a, b in zip(learned, always)))
     return row
 
 
-def sweep_summary(sweep: pathlib.Path) -> dict:
-    runs = sorted(p for p in sweep.iterdir() if (p / "eval_val.json").exists())
-    seeds = {json.loads((run / "config.json").read_text())["seed"]: run_row(run) for run in runs}
+def sweep_summary(sweep: pathlib.Path, split: str) -> dict:
+    runs = sorted(p for p in sweep.iterdir() if (p / f"eval_{split}.json").exists())
+    seeds = {json.loads((run / "config.json").read_text())["seed"]: run_row(run, split) for run in runs}
     rows = list(seeds.values())
     summary = {"seeds": {str(seed): row for seed, row in sorted(seeds.items())},
-               "val_success_mean_t95": mean_t95([r["val_success"] for r in rows]),
-               "val_success_runner_rules_mean_t95": mean_t95([r["val_success_runner_rules"] for r in rows])}
-    if rows and all("val_success_always_track_object" in r for r in rows):
+               "success_mean_t95": mean_t95([r["success"] for r in rows]),
+               "success_runner_rules_mean_t95": mean_t95([r["success_runner_rules"] for r in rows])}
+    if rows and all("success_always_track_object" in r for r in rows):
+        summary["success_always_track_object_mean_t95"] = mean_t95([r["success_always_track_object"] for r in rows])
         summary["learned_minus_track_object_mean_t95"] = mean_t95(
-            [r["val_success"] - r["val_success_always_track_object"] for r in rows])
+            [r["success"] - r["success_always_track_object"] for r in rows])
     return summary
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sweeps", nargs="+", type=pathlib.Path, help="sweep folders (hrlsac sweep --out)")
+    parser.add_argument("--split", choices=["val", "test"], default="val", help="the split evaluated (default val)")
     parser.add_argument("--out", type=pathlib.Path, help="also write the summary to this JSON file")
     args = parser.parse_args()
-    summary = {sweep.name: sweep_summary(sweep) for sweep in args.sweeps}
+    summary = {"split": args.split, **{sweep.name: sweep_summary(sweep, args.split) for sweep in args.sweeps}}
     text = json.dumps(summary, indent=1)
     print(text)
     if args.out:
