@@ -86,8 +86,12 @@ def easy_trainer(tmp_path, algo: str, seed: int = 0, **overrides) -> Trainer:
     return Trainer(config, tmp_path / "run")
 
 
-@pytest.mark.parametrize("algo", ["hrl-sac", "sac"])
-def test_agent_beats_its_untrained_self_on_an_easy_mission(tmp_path, algo):
+def test_hrl_sac_beats_its_untrained_self_on_an_easy_mission(tmp_path):
+    check_learns(tmp_path, "hrl-sac")  # flat SAC: tests/test_learning_sac.py
+
+
+def check_learns(tmp_path, algo: str) -> None:
+    """Train ``algo`` on the easy missions with the test's budget and assert :func:`learning_checks`."""
     trainer = easy_trainer(tmp_path, algo)
     before = evaluate(trainer)
     trainer.run(progress=False)
