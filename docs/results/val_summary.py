@@ -1,5 +1,5 @@
-"""Summarise sweeps' evaluations on a split (val: 500 scenarios, test: 1,000): per seed the success under the environment's and the mission
-runner's rules and the share that ran dry; for HRL-SAC also the sub-goal reachability, TrackObject at every
+"""Summarise sweeps' evaluations on a split (val: 500 scenarios, test: 1,000): per seed the success under the
+environment's and the mission runner's rules and the share that ran dry; for HRL-SAC also the sub-goal reachability, TrackObject at every
 decision and the scenarios only one of the two won; the means over seeds with their t 95 % intervals.
 
 Each run needs ``hrlsac evaluate RUN --split SPLIT --episodes N`` with and without ``--flight-rules`` (the default
@@ -13,20 +13,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import pathlib
-import statistics
 
-T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
+from autonomy.recorder import write_json_atomic
+from policies.evaluation.stats import t_interval
 
 
 def mean_t95(values: list[float]) -> list[float]:
-    """[mean, low, high]: the t 95 % interval over seeds (the mean alone for one)."""
-    m = statistics.mean(values)
-    if len(values) < 2:
-        return [round(m, 4)] * 3
-    half = statistics.stdev(values) / math.sqrt(len(values)) * T_975[len(values) - 1]
-    return [round(m, 4), round(m - half, 4), round(m + half, 4)]
+    """[mean, low, high]: the t 95 % interval over seeds (the mean alone for one), as `hrlsac compare` computes it."""
+    mean, _, interval = t_interval(values)
+    low, high = interval or (mean, mean)
+    return [round(mean, 4), round(low, 4), round(high, 4)]
 
 
 def run_row(run: pathlib.Path, split: str) -> dict:
@@ -67,10 +64,9 @@ def main() -> None:
     parser.add_argument("--out", type=pathlib.Path, help="also write the summary to this JSON file")
     args = parser.parse_args()
     summary = {"split": args.split, **{sweep.name: sweep_summary(sweep, args.split) for sweep in args.sweeps}}
-    text = json.dumps(summary, indent=1)
-    print(text)
+    print(json.dumps(summary, indent=2))
     if args.out:
-        args.out.write_text(text + "\n")
+        write_json_atomic(args.out, summary)
 
 
 if __name__ == "__main__":
