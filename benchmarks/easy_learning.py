@@ -1,4 +1,4 @@
-"""Learning reliability across seeds: the easy missions of tests/test_learning.py, by algorithm and update precision.
+"""Learning reliability across seeds: the easy missions of tests/easy_missions.py, by algorithm and update precision.
 
 tests/test_learning.py trains one seed per algorithm and asks for +20 points of success. Whether that one seed
 learns says little about the learner; this script trains the same configuration (the test's own missions,
@@ -73,7 +73,7 @@ def train_once(algo: str, dtype: str, seed: int, first_layer_float32: bool = Fal
     """One run of the test's configuration with ``seed`` and ``update_dtype``; success before and after."""
     import torch
 
-    import test_learning as easy
+    import easy_missions as easy
 
     if first_layer_float32:
         first_layer_in_float32()
@@ -97,9 +97,9 @@ def train_once(algo: str, dtype: str, seed: int, first_layer_float32: bool = Fal
 
 def easy_steps() -> dict[str, int]:
     """The test's training budgets per algorithm."""
-    import test_learning
+    import easy_missions
 
-    return test_learning.STEPS
+    return easy_missions.STEPS
 
 
 def parse_seeds(text: str) -> list[int]:

@@ -66,6 +66,15 @@ def check_in(owner: str, name: str, value: object, allowed: Interval, hint: str 
         raise ValueError(f"{owner}.{name} must be {allowed}, got {brief(value)}{hint}")
 
 
+def check_choice(owner: str, name: str, value: object, choices: Iterable[str]) -> None:
+    """Raise ``ValueError("Owner.name must be 'a' or 'b', got value")`` unless ``value`` is one of ``choices``."""
+    choices = tuple(choices)
+    if value not in choices:
+        listed = " or ".join(map(repr, choices)) if len(choices) <= 2 else \
+            "one of " + ", ".join(map(repr, choices))
+        raise ValueError(f"{owner}.{name} must be {listed}, got {brief(value)}")
+
+
 def check_number(owner: str, name: str, value: object, low: float, high: float, integer: bool = False) -> None:
     """:func:`check_in` with the range ``[low, high]``, both ends included."""
     check_in(owner, name, value, Interval(low, high, integer=integer))

@@ -16,7 +16,7 @@ import numpy as np
 from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
 from missions.belief_search import check_action_frame
 from missions.mission import FlightSettings
-from missions.validation import Interval, check_fields
+from missions.validation import Interval, check_choice, check_fields
 
 
 @dataclass(frozen=True)
@@ -287,15 +287,10 @@ class TrainConfig:
     """torch.set_num_threads: 1 is fastest for these small networks on a shared 2-core machine."""
 
     def __post_init__(self) -> None:
-        if self.algo not in ("hrl-sac", "sac"):
-            raise ValueError(f"TrainConfig.algo must be 'hrl-sac' or 'sac', got {self.algo!r}")
-        if self.update_dtype not in ("float32", "bfloat16"):
-            raise ValueError(f"TrainConfig.update_dtype must be 'float32' or 'bfloat16', got {self.update_dtype!r}")
-        if self.intrinsic_reward not in ("progress", "distance"):
-            raise ValueError(f"TrainConfig.intrinsic_reward must be 'progress' or 'distance', "
-                             f"got {self.intrinsic_reward!r}")
-        if self.task not in ("SarSearch-v0", "SarSearch-v1"):
-            raise ValueError(f"TrainConfig.task must be 'SarSearch-v0' or 'SarSearch-v1', got {self.task!r}")
+        for name, choices in (("algo", ("hrl-sac", "sac")), ("task", ("SarSearch-v0", "SarSearch-v1")),
+                              ("update_dtype", ("float32", "bfloat16")), ("intrinsic_reward", ("progress", "distance")),
+                              ("meta_joint_goals", ("learned", "random"))):
+            check_choice("TrainConfig", name, getattr(self, name), choices)
         self._check_ignores("low_level_ignores", "observation", list(self.layout.by_name))
         self._check_ignores("meta_ignores", "meta observation", [f.name for f in self.layout.fields if f.name != "goal"])
         counts = (("total_steps", 1, 10**10), ("num_envs", 1, 4096), ("batch_size", 1, 65536),
@@ -322,9 +317,6 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.meta_belief_bonus applies to SarSearch-v1 only (its belief), got "
                              f"{self.meta_belief_bonus!r} on {self.task}; leave it at 0")
         check_action_frame("TrainConfig", self.action_frame, self.task)
-        if self.meta_joint_goals not in ("learned", "random"):
-            raise ValueError(f"TrainConfig.meta_joint_goals must be 'learned' or 'random', "
-                             f"got {self.meta_joint_goals!r}")
         if self.meta_joint_goals == "random" and self.meta_only_steps <= 0 and self.algo == "hrl-sac":
             raise ValueError("TrainConfig.meta_joint_goals 'random' needs a meta-only phase for the meta-controller to "
                              "learn in: set meta_only_steps above 0")

@@ -50,7 +50,13 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
               (["--out", "{tmp}/r", "--set", 'missions=["{tmp}/sweep.yaml"]'],  # a training mission file, broken
                "{tmp}/sweep.yaml: runs: unknown key (allowed: name, flight, geofence, scenario)"),
               (["--out", "/dev/null/run"], "/dev/null/run"),
-              ([], "the following arguments are required: --out")],
+              ([], "--out is required: the run folder to write (or --sweep FILE --run NAME)"),
+              (["--sweep", MISSING], f"{MISSING}: file not found"),
+              (["--sweep", "{tmp}/sweep.yaml"], "{tmp}/sweep.yaml: runs: unknown key"),
+              (["--sweep", "{tmp}/sweep.yaml", "--seed", "1", "--set", "gamma=0.9"],
+               "--seed, --set: set by the sweep file's run with --sweep; change the sweep file"),
+              (["--run", "hrl-sac-default-seed0", "--out", "{tmp}/r"], "--run names a run of a sweep file: give "
+                                                                         "--sweep FILE too")],
     "sweep": [([MISSING], MISSING),
               (["{tmp}/sweep.yaml", "--max-parallel", "x"], "argument --max-parallel: invalid int value: 'x'"),
               (["{tmp}/sweep.yaml", "--bogus"], "unrecognized arguments: --bogus")],

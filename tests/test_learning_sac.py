@@ -1,12 +1,12 @@
-"""Flat SAC measurably beats its untrained self on an easy mission: tests/test_learning.py's check (its task,
-budget and what "learned" means), in a file of its own so that pytest-xdist's ``--dist loadfile`` (the Makefile's)
-trains the two agents on two workers: each run takes 2.5-3 minutes on one core, and together in one file they were
-the suite's longest stretch."""
+"""Flat SAC measurably beats its untrained self on an easy mission: tests/easy_missions.py's check (the task,
+budget and what "learned" means), in a file apart from HRL-SAC's (tests/test_learning.py) so that pytest-xdist's
+``--dist loadfile`` (the Makefile's) trains the two agents on two workers: each run takes 2.5-3 minutes on one
+core, and together in one file they were the suite's longest stretch."""
 from __future__ import annotations
 
 import pytest
 
-from test_learning import check_learns
+from easy_missions import check_learns
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 

@@ -230,6 +230,31 @@ def test_a_resumed_sweep_run_is_the_folder_hrlsac_train_writes_uninterrupted(swe
                       torch.load(reference / "checkpoint.pt", weights_only=False))
 
 
+def test_hrlsac_train_trains_one_run_of_a_sweep_file_as_the_sweep_does(sweep_runs, tmp_path):
+    sweep, *_ = sweep_runs
+    sweep_file = tmp_path / "tiny.yaml"
+    sweep_file.write_text(json.dumps(SWEEP))  # JSON is YAML
+    result = subprocess.run([*HRLSAC, "train", "--sweep", str(sweep_file), "--quiet"], capture_output=True,
+                            text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip().endswith("give --run NAME; the sweep's runs: sac-default-seed3, "
+                                          "hrl-sac-default-seed3")
+    subprocess.run([*HRLSAC, "train", "--sweep", str(sweep_file), "--run", KILLED, "--quiet"], check=True,
+                   timeout=300, cwd=tmp_path)
+    trained = tmp_path / "runs" / "tiny" / KILLED  # the folder the sweep file's 'out' gives the run
+    run = sweep.out / KILLED
+    assert json.loads((trained / "config.json").read_text()) == json.loads((run / "config.json").read_text())
+    assert log_rows(trained / "progress.csv") == log_rows(run / "progress.csv")
+    assert_same_state(torch.load(trained / "checkpoint.pt", weights_only=False),
+                      torch.load(run / "checkpoint.pt", weights_only=False))
+    # The sweep would now skip it; a changed sweep file is refused on --resume, naming the field.
+    changed = tmp_path / "changed.yaml"
+    changed.write_text(json.dumps({**SWEEP, "set": {**SMALL, "batch_size": 16}}))
+    result = subprocess.run([*HRLSAC, "train", "--sweep", str(changed), "--run", KILLED, "--out", str(trained),
+                             "--resume", "--quiet"], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2 and "was trained with batch_size=32, the sweep now asks 16" in result.stderr
+
+
 def test_a_sweep_refuses_run_folders_trained_with_another_config(sweep_runs):
     sweep, *_ = sweep_runs
     changed = sweep_from_dict({**SWEEP, "set": {**SMALL, "learning_rate": 0.001}}, out=sweep.out)

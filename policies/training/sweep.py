@@ -26,6 +26,7 @@ from typing import Callable
 
 from autonomy.recorder import write_json_atomic
 from policies.checkpoint import CHECKPOINT
+from policies.config import TrainConfig
 from policies.reports.sweep_table import DONE, FAILED, PENDING, RUNNING, SKIPPED, ProgressTable, RunStatus
 from policies.training.sweep_config import RunSpec, SweepConfig
 from simulation.worker_pool import connect_ray, limit_threads, ray_cpus
@@ -87,12 +88,20 @@ def check_run_folders(sweep: SweepConfig) -> None:
         path = spec.folder / "config.json"
         if not path.exists():
             continue
-        stored = json.loads(path.read_text())
-        wanted = json.loads(json.dumps(spec.config.to_dict()))
-        for key in sorted(set(stored) | set(wanted)):
-            if key != "total_steps" and stored.get(key) != wanted.get(key):
-                raise ValueError(f"run folder {spec.folder} was trained with {key}={stored.get(key)!r}, the sweep "
-                                 f"now asks {wanted.get(key)!r}; restore the sweep file or choose another out")
+        difference = config_difference(json.loads(path.read_text()), spec.config)
+        if difference:
+            raise ValueError(f"run folder {spec.folder} was trained with {difference}; restore the sweep file or "
+                             "choose another out")
+
+
+def config_difference(stored: dict, wanted: TrainConfig) -> str | None:
+    """The first field other than ``total_steps`` in which a run folder's config.json (``stored``) differs from
+    ``wanted``, as "FIELD=STORED, the sweep now asks WANTED"; None when they agree."""
+    wanted_dict = json.loads(json.dumps(wanted.to_dict()))
+    for key in sorted(set(stored) | set(wanted_dict)):
+        if key != "total_steps" and stored.get(key) != wanted_dict.get(key):
+            return f"{key}={stored.get(key)!r}, the sweep now asks {wanted_dict.get(key)!r}"
+    return None
 
 
 def latest_progress(folder: Path) -> tuple[int, float] | None:
