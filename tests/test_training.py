@@ -7,12 +7,14 @@ import json
 import pickle
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
 from autonomy.observation import META_OBS_DIM
+from autonomy.policy import load_policy
 from missions.goals import SEARCH_LOCATION
 from missions.mission import FlightSettings
 from missions.search import footprint_half_width_m
@@ -20,6 +22,7 @@ from policies.checkpoint import CheckpointPolicy
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.shaping import cross_track_m
 from policies.evaluation.parallel import evaluate_checkpoint, quick_evaluation
+from policies.training.sweep_config import load_sweep
 from policies.training.trainer import Trainer
 
 SMALL = NetworkConfig(hidden=(32, 32))
@@ -638,3 +641,15 @@ def test_a_checkpoint_written_before_the_sub_packages_still_resumes(tmp_path):
                                                                               b"policies.ambiguous_env")
     assert old != pickled and b"policies.env_core" in old
     assert pickle.dumps(load_environment(old)) == pickled
+
+
+@pytest.mark.parametrize("artifact, sweep_file, run", [
+    ("hrl-sac.pt", "comparison-v2-hrl-capped.sweep.yaml", "hrl-sac-default-seed0"),
+    ("sac.pt", "comparison-capped-sac.sweep.yaml", "sac-default-seed0")])
+def test_the_shipped_policies_are_the_sweep_file_runs_the_docs_name(artifact, sweep_file, run):
+    # docs/training.md: `hrlsac train --sweep docs/results/SWEEP --run RUN` is the shipped policy's recipe; the
+    # artifact's manifest carries the config it was trained with, which must be that run's, field for field.
+    root = Path(__file__).resolve().parents[1]
+    manifest = load_policy(root / "policies" / "pretrained" / artifact).manifest
+    spec = {spec.name: spec for spec in load_sweep(root / "docs" / "results" / sweep_file).runs}[run]
+    assert manifest.training_config == json.loads(json.dumps(spec.config.to_dict()))
