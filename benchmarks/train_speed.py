@@ -121,8 +121,14 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--presets", default="default,3x512", help=f"comma-separated, from {', '.join(PRESETS)}")
     parser.add_argument("--task", default="SarSearch-v1", choices=["SarSearch-v1", "SarSearch-v0"])
+    parser.add_argument("--agents", default=",".join(AGENTS),
+                        help="comma-separated subset of the agents above (sb3 and ours always run: the ratio); "
+                             "without hardware bfloat16 the bf16 ones run at a fraction of the others' speed")
     parser.add_argument("--out", default=results_file("train_speed.json"))
     args = parser.parse_args()
+    agents = [agent for agent in AGENTS if agent in {"ours", "sb3", *(a.strip() for a in args.agents.split(","))}]
+    if unknown := [a.strip() for a in args.agents.split(",") if a.strip() and a.strip() not in AGENTS]:
+        parser.error(f"unknown agent(s) {unknown}; choose from {', '.join(AGENTS)}")
     presets = [name.strip() for name in args.presets.split(",") if name.strip()]
     if unknown := [name for name in presets if name not in PRESETS]:
         parser.error(f"unknown preset(s) {unknown}; choose from {', '.join(PRESETS)}")
@@ -133,13 +139,13 @@ def main() -> int:
     steps = {"default": args.steps, "3x512": args.steps_3x512}
     steps = {name: max(8, steps[name] // 8 * 8) for name in presets}  # whole vector steps for ours_vec8
 
-    report: dict = {"task": args.task, "warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats,
+    report: dict = {"agents": agents, "task": args.task, "warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats,
                     "torch_threads": 1, "batch_size": BATCH_SIZE, "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
     table = []
     for name in presets:
         hidden, n = PRESETS[name], steps[name]
-        wall: dict[str, list[float]] = {agent: [] for agent in AGENTS}
-        cpu: dict[str, list[float]] = {agent: [] for agent in AGENTS}
+        wall: dict[str, list[float]] = {agent: [] for agent in agents}
+        cpu: dict[str, list[float]] = {agent: [] for agent in agents}
         for repeat in range(args.repeats):
             def ours(layer_norm: bool, num_envs: int = 1, updates_per_step: float = 1.0, dtype: str = "float32"):
                 config = our_config(hidden, layer_norm, num_envs, updates_per_step, args.warmup, n, repeat, dtype,
@@ -152,18 +158,18 @@ def main() -> int:
                 "sb3": lambda: time_sb3(hidden, flight, args.warmup, n, repeat, args.task),
                 "ours_vec8": ours(True, num_envs=8, updates_per_step=0.125),
             }
-            for agent in AGENTS:
+            for agent in agents:
                 w, c = runs[agent]()
                 wall[agent].append(w)
                 cpu[agent].append(c)
             print(f"{name} run {repeat + 1}/{args.repeats}: "
-                  + ", ".join(f"{agent} {wall[agent][-1]:,.1f}/s" for agent in AGENTS), flush=True)
-        medians = summarise({f"{agent}_steps_per_s": wall[agent] for agent in AGENTS},
+                  + ", ".join(f"{agent} {wall[agent][-1]:,.1f}/s" for agent in agents), flush=True)
+        medians = summarise({f"{agent}_steps_per_s": wall[agent] for agent in agents},
                             f"{name} ({' x '.join(map(str, hidden))}): wall-clock steps/s, medians over "
                             f"{args.repeats} runs of {n:,} timed steps")
-        cpu_medians = {agent: statistics.median(cpu[agent]) for agent in AGENTS}
-        ratio = {agent: medians[f"{agent}_steps_per_s"] / medians["sb3_steps_per_s"] for agent in AGENTS}
-        cpu_ratio = {agent: cpu_medians[agent] / cpu_medians["sb3"] for agent in AGENTS}
+        cpu_medians = {agent: statistics.median(cpu[agent]) for agent in agents}
+        ratio = {agent: medians[f"{agent}_steps_per_s"] / medians["sb3_steps_per_s"] for agent in agents}
+        cpu_ratio = {agent: cpu_medians[agent] / cpu_medians["sb3"] for agent in agents}
         report["presets"][name] = {
             "hidden": list(hidden), "timed_steps": n, "medians_wall_steps_per_s": medians,
             "medians_cpu_steps_per_s": {f"{agent}_steps_per_s": v for agent, v in cpu_medians.items()},
@@ -175,14 +181,14 @@ def main() -> int:
     print("\nflat SAC training, one env, 1 update of batch 128 per env step, 1 torch thread (medians):")
     print(f"  {'preset':9s} {'agent':34s} {'steps/s':>9s} {'x SB3':>7s} {'CPU steps/s':>12s} {'x SB3':>7s}")
     for name, hidden, medians, cpu_medians, ratio, cpu_ratio in table:
-        for agent in AGENTS:
+        for agent in agents:
             extra = "   (not the same work)" if agent == "ours_vec8" else ""
             print(f"  {name:9s} {LABELS[agent]:34s} {medians[f'{agent}_steps_per_s']:9,.1f} {ratio[agent]:6.2f}x "
                   f"{cpu_medians[agent]:12,.1f} {cpu_ratio[agent]:6.2f}x{extra}")
     verdicts = {}
     for name, hidden, medians, cpu_medians, ratio, cpu_ratio in table:
         target = TARGETS[name]
-        compared = ("ours", "ours_noln", "ours_bf16", "ours_noln_bf16")  # the same work as SB3 per step
+        compared = [a for a in ("ours", "ours_noln", "ours_bf16", "ours_noln_bf16") if a in agents]  # SB3's work
         verdicts[name] = {agent: bool(ratio[agent] >= target) for agent in compared}
         print(f"{name} ({' x '.join(map(str, hidden))}), target >= {target}x SB3: " + "; ".join(
             f"{LABELS[agent]} {ratio[agent]:.2f}x -> {'meets' if verdicts[name][agent] else 'MISSES'}"
