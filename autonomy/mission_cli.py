@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from hrlsac_cli import GROUPS
+from missions.cli_help import HelpFormatter
 
 DEFAULT_OUT = Path("mission-output")
 RUN_SUMMARY = GROUPS["mission"]["run"][1]  # written once, in the dispatcher's table (``hrlsac mission --help``)
@@ -19,7 +20,7 @@ RUN_SUMMARY = GROUPS["mission"]["run"][1]  # written once, in the dispatcher's t
 def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.ArgumentParser:
     """The arguments of every ``hrlsac mission`` subcommand (``simulated``: the vehicle is the simulated one)."""
     parser = argparse.ArgumentParser(prog=prog, description=summary,
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("mission", help="mission file (YAML), e.g. missions/library/demo.yaml")
     parser.add_argument("--policy", required=True, help="policy artifact written by 'hrlsac export'")
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default: {DEFAULT_OUT}/MISSION-NAME)")

@@ -9,6 +9,7 @@ import argparse
 import sys
 import time
 
+from missions.cli_help import HelpFormatter
 from missions.datasets import YoloDataset
 from missions.scenario import CATEGORIES
 from missions.yolo_labels import DatasetError, DatasetSummary
@@ -18,7 +19,7 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description="Make the synthetic SAR dataset or inspect a YOLO dataset.")
     commands = parser.add_subparsers(dest="command", required=True, metavar="{synth,info}")
     synth = commands.add_parser("synth", help="write the synthetic maritime dataset (YOLO format, 640x480 PNG)",
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                formatter_class=HelpFormatter)
     synth.add_argument("out", metavar="OUT", help="output directory (created; must be empty unless --overwrite)")
     synth.add_argument("--count", type=int, default=200, help="number of images (split 70/20/10)")
     synth.add_argument("--seed", type=int, default=0, help="seed: the same seed writes identical files")

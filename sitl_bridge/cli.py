@@ -7,6 +7,7 @@ import signal
 import sys
 import time
 
+from missions.cli_help import HelpFormatter
 from missions.geodesy import GeoPoint
 from missions.signing import load_key_file
 from sitl_bridge.autopilot import AutopilotEvent
@@ -21,7 +22,7 @@ FAILSAFE_ACTIONS = {"hold": 5, "posctl": 0, "land": 4, "rtl": 3}
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                     formatter_class=HelpFormatter)
     home = parser.add_argument_group("vehicle")
     home.add_argument("--autopilot", choices=AUTOPILOT_TYPES, default="px4",
                       help="autopilot personality: PX4 (OFFBOARD, PX4 SITL ports) or ArduPilot Copter (GUIDED, "

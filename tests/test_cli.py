@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import socket
@@ -23,6 +24,23 @@ def test_help_lists_commands_without_importing_heavy_packages():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
     assert "sitl" in out and "demo" in out
     assert out.strip().endswith("[]")
+
+
+@pytest.mark.parametrize("command", [["sitl"], ["train"], ["sweep"], ["evaluate"], ["export"], ["mission", "replay"],
+                                     ["mission", "run"], ["dataset", "synth"]])
+def test_help_states_real_defaults_once_and_no_empty_ones(command):
+    from cli_harness import run_cli
+
+    result = run_cli(*command, "--help")
+    text = " ".join(result.out.split())  # argparse wraps lines
+    assert result.code == 0 and "--help" in text
+    assert "(default: None)" not in text and "(default: False)" not in text
+    assert not re.search(r"\(default[^)]*\) \(default", text), text  # never twice for one option
+    if command == ["sitl"]:
+        assert "--home HOME home as LAT,LON,ALT (degrees, degrees, metres AMSL) (default: 47.397742,8.545594,488.0)" \
+            in text
+    if command == ["mission", "replay"]:
+        assert "output folder (default: mission-output/MISSION-NAME) --seed" in text
 
 
 def test_unknown_command_is_a_one_line_error():

@@ -15,12 +15,13 @@ import os
 import sys
 from pathlib import Path
 
+from missions.cli_help import HelpFormatter
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 
 def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("run", help="run folder (or checkpoint file) written by hrlsac train")
     parser.add_argument("--split", choices=["train", "val", "test"], default="test")
     parser.add_argument("--episodes", type=int, default=None,

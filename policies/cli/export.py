@@ -4,11 +4,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from missions.cli_help import HelpFormatter
+
 
 def main(argv: list[str], prog: str = "hrlsac export") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
                                      epilog="The artifact format is described in docs/export.md.",
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("checkpoint", help="run folder (its checkpoint.pt) or checkpoint file written by hrlsac train")
     parser.add_argument("-o", "--out", required=True, help="artifact to write, e.g. policy.pt")
     parser.add_argument("--format", choices=["torchscript", "torch-export"], default="torchscript")

@@ -9,12 +9,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from missions.cli_help import HelpFormatter
 from simulation.worker_pool import RAY_EXTRA, WorkerPoolError
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].split("\n\n")[0].strip(),
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("config", help="sweep file (YAML), see docs/scaling.md")
     parser.add_argument("--ray", metavar="ADDRESS", default="local",
                         help="'local' (start Ray on this machine), 'auto' (the cluster this machine joined with "

@@ -14,6 +14,7 @@ import signal
 import sys
 from pathlib import Path
 
+from missions.cli_help import HelpFormatter
 from policies.checkpoint import CHECKPOINT
 
 
@@ -26,7 +27,8 @@ DEFAULTS = {"algo": "hrl-sac", "preset": "default", "steps": 100_000, "seed": 0,
 def build_parser(prog: str) -> argparse.ArgumentParser:
     # The options of SWEEP_DECIDES default to None here (DEFAULTS fills them in, the help texts name them), so
     # that main can tell an option given on the command line from its default.
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].split("\n\n")[0].strip())
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].split("\n\n")[0].strip(),
+                                     formatter_class=HelpFormatter)
     parser.add_argument("--algo", choices=["hrl-sac", "sac"], help="algorithm (default: hrl-sac)")
     parser.add_argument("--preset", choices=["default", "paper"], help="network sizes and settings (default: default)")
     parser.add_argument("--steps", type=int, help="environment steps to train for (default: 100000)")
