@@ -11,7 +11,8 @@ ArduPilot's source, read through the search tools (docs/sitl.md, "ArduPilot Copt
 * MAV_CMD_NAV_TAKEOFF: param7 in metres above home, armed and landed, in GUIDED or LOITER; the vehicle stays in
   its mode when the climb completes.
 * GUIDED: velocity and position targets (SET_POSITION_TARGET_LOCAL_NED); GUID_TIMEOUT (3 s) after the last
-  velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it.
+  velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it. MAV_CMD_DO_REPOSITION
+  (COMMAND_INT only; MAVSDK's goto_location) sets a GUIDED position target, switching to GUIDED with its flag.
 * RTL climbs (RTL_ALT, cone slope), returns, hovers RTL_LOIT_TIME, lands; LAND and RTL disarm once landed, other
   modes DISARM_DELAY after landing. Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`; the modes' velocity
   commands: :mod:`sitl_bridge.ardupilot_guidance`.
@@ -25,6 +26,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from missions.geodesy import LocalFrame
 from sitl_bridge.ardupilot_failsafes import CopterFailsafes
 from sitl_bridge.ardupilot_guidance import CopterGuidance
 from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
@@ -63,8 +65,9 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
     CAPABILITIES = CAPABILITIES
     FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
 
-    def __init__(self, params: ParameterStore, airframe: MultirotorParams):
+    def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame | None = None):
         super().__init__(params, airframe)
+        self.frame = frame  # the simulator's NED frame, for DO_REPOSITION's geodetic targets (None: not supported)
         self.mode = CopterMode(int(params["INITIAL_MODE"]))
         self.land_complete = True
         self._ground_since_s = -math.inf
@@ -232,7 +235,35 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
             return ACCEPTED if self.set_mode(as_int(p[1], 0) & 0xFF, now, state, "DO_SET_MODE") else FAILED
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
+        if command == mavlink.MAV_CMD_DO_REPOSITION and frame is not None and self.frame is not None:
+            return self._reposition(p, frame, now, state)
         return UNSUPPORTED
+
+    def _reposition(self, p: tuple[float, ...], frame: int, now: float, state: VehicleState) -> int:
+        """GCS_MAVLINK_Copter::handle_command_int_do_reposition (a COMMAND_INT; x/y degrees * 1e7, z metres in the
+        command's frame): outside GUIDED it needs param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (else DENIED); a
+        latitude/longitude out of range or both zero (Location::sanitize), or a frame other than global (AMSL)
+        or relative to home, DENIED; then GUIDED flies to the point at WPNAV_SPEED and holds (no yaw change);
+        FAILED if GUIDED cannot be entered. Armed on the ground the point is not taken (not checked against
+        ArduPilot: a GUIDED takeoff replaces it there anyway)."""
+        change_mode = as_int(p[1], 0) & 1
+        if self.mode is not CopterMode.GUIDED and not change_mode:
+            return DENIED
+        x, y, z = p[4], p[5], p[6]
+        if abs(x) > 90e7 or abs(y) > 180e7 or (x == 0 and y == 0) or not math.isfinite(z):
+            return DENIED
+        if frame in (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT):
+            down = self.frame.home.alt_m - z
+        elif frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+            down = self.home_ned[2] - z
+        else:
+            return DENIED
+        if not self.set_mode(CopterMode.GUIDED, now, state, "DO_REPOSITION"):
+            return FAILED
+        if self.armed and not state.on_ground:
+            north, east, _ = self.frame.to_ned(x / 1e7, y / 1e7, self.frame.home.alt_m - state.down_m)
+            self.setpoint = Setpoint(now, False, north, east, down)
+        return ACCEPTED
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:
         """SET_MODE: handled like DO_SET_MODE, and ArduPilot ACKs it (COMMAND_ACK with command 11)."""

@@ -6,9 +6,12 @@ why we copy it is noted where it matters; ``docs/sitl.md`` lists the differences
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from missions.geodesy import LocalFrame
 
 from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
@@ -32,6 +35,10 @@ CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOC
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
 
+INT32_MAX = 2**31 - 1  # COMMAND_INT x and y both INT32_MAX: no position given (mavlink_receiver.cpp)
+NAN_AS_INT = 0x7FF80000  # ... both this: a NaN sent as an int by mistake, DENIED
+REPOSITION_CHANGE_MODE = 1  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, the only flag PX4 supports
+
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
                  FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
@@ -45,11 +52,15 @@ class Autopilot(AutopilotBase):
     CAPABILITIES = CAPABILITIES
     FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
 
-    def __init__(self, params: ParameterStore, airframe: MultirotorParams, home_alt_m: float):
+    def __init__(self, params: ParameterStore, airframe: MultirotorParams, home_alt_m: float,
+                 frame: LocalFrame | None = None):
         super().__init__(params, airframe)
         self.home_alt_m = home_alt_m  # AMSL; NAV_TAKEOFF's param7 is an AMSL altitude in PX4
+        self.frame = frame  # the simulator's NED frame, for DO_REPOSITION's geodetic targets (None: not supported)
         self.mode = FlightMode.HOLD
         self.hold_target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.hold_speed_mps: float | None = None  # a reposition's ground speed (None: MPC_XY_CRUISE)
+        self.hold_yaw_rad: float | None = None  # a reposition's heading (None: hold the heading)
         self.takeoff_alt_m = 0.0
         self.rtl_landing = False
         self.armed_at_s = 0.0
@@ -122,6 +133,7 @@ class Autopilot(AutopilotBase):
             return ACCEPTED
         self.mode = mode
         self.state_changed = True
+        self.hold_speed_mps = self.hold_yaw_rad = None  # Navigator: entering Loiter resets the speed setpoint
         if mode in (FlightMode.HOLD, FlightMode.POSCTL):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
         elif mode is FlightMode.TAKEOFF:
@@ -194,6 +206,8 @@ class Autopilot(AutopilotBase):
             return self.set_mode(mode, now, state, "DO_SET_MODE", source_component)
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
+        if command == mavlink.MAV_CMD_DO_REPOSITION and self.frame is not None:
+            return self._reposition(p, frame, now, state)
         return UNSUPPORTED
 
     def _takeoff(self, altitude_amsl: float, now: float, state: VehicleState) -> int:
@@ -212,6 +226,36 @@ class Autopilot(AutopilotBase):
             self.hold_target = (self.hold_target[0], self.hold_target[1], -target)
             return ACCEPTED
         return self.set_mode(FlightMode.TAKEOFF, now, state, f"NAV_TAKEOFF to {target:.1f} m")
+
+    def _reposition(self, p: tuple[float, ...], frame: int | None, now: float, state: VehicleState) -> int:
+        """MAV_CMD_DO_REPOSITION (MAVSDK's goto_location) as PX4's Commander (the change-mode flag, then Hold) and
+        Navigator (armed only: position, AMSL altitude, ground speed, heading in radians; NaN keeps the current
+        one) split it; docs/sitl.md ("PX4: what was checked") has the sources and what is not emulated."""
+        flags = as_int(p[1], 0)
+        if flags != REPOSITION_CHANGE_MODE:
+            return UNSUPPORTED
+        lat, lon = p[4], p[5]
+        if frame is not None:  # COMMAND_INT (mavlink_receiver.cpp, handle_message_command_int)
+            if lat == lon == NAN_AS_INT:
+                return DENIED
+            lat, lon = (math.nan, math.nan) if lat == lon == INT32_MAX else (lat / 1e7, lon / 1e7)
+        if abs(lat) > 90.0 or abs(lon) > 180.0:  # not a place (a NaN compares False: "keep the position")
+            return DENIED
+        if not self.gps_ok:
+            return TEMPORARILY_REJECTED
+        result = self.set_mode(FlightMode.HOLD, now, state, "DO_REPOSITION")
+        if not self.armed or state.on_ground:
+            return result
+        north, east, down = state.north_m, state.east_m, state.down_m
+        if math.isfinite(lat) and math.isfinite(lon):
+            north, east, _ = self.frame.to_ned(lat, lon, self.frame.home.alt_m - state.down_m)
+        if math.isfinite(p[6]):
+            down = self.frame.home.alt_m - p[6]
+        self.hold_target = (north, east, down)
+        self.hold_speed_mps = p[0] if math.isfinite(p[0]) and p[0] > 0.0 else None
+        self.hold_yaw_rad = p[3] if math.isfinite(p[3]) else None
+        self._event(now, f"reposition to {north:.1f} m N, {east:.1f} m E, {-down:.1f} m up")
+        return result
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:
         """SET_MODE: PX4 turns it into DO_SET_MODE internally and sends no ACK for the message."""
@@ -297,11 +341,14 @@ class Autopilot(AutopilotBase):
             return self._landing_command(state, self.hold_target[0], self.hold_target[1])
         if mode is FlightMode.RTL:
             return self._rtl_command(state)
-        # HOLD and POSCTL (sticks centred): keep the captured position; on the ground stay down.
+        # HOLD and POSCTL (sticks centred): keep the captured position (or fly to a reposition's); on the ground
+        # stay down.
         north, east, down = self.hold_target
         if state.on_ground and down >= 0.0:
             return HOVER
-        return velocity_toward(state, north, east, down, self.airframe, speed_xy_mps=self.params["MPC_XY_CRUISE"])
+        command = velocity_toward(state, north, east, down, self.airframe,
+                                  speed_xy_mps=self.hold_speed_mps or self.params["MPC_XY_CRUISE"])
+        return command if self.hold_yaw_rad is None else dataclasses.replace(command, yaw_rad=self.hold_yaw_rad)
 
     def _offboard_command(self, state: VehicleState) -> VelocityCommand:
         sp = self.setpoint

@@ -38,8 +38,8 @@ from sitl_bridge.vehicle_messages import MessageHandlers
 def make_autopilot(config: VehicleConfig, params: ParameterStore, home_alt_m: float) -> AutopilotBase:
     """A freshly booted autopilot of the configured personality."""
     if config.autopilot == "ardupilot":
-        return ArduCopter(params, config.airframe)
-    return Autopilot(params, config.airframe, home_alt_m=home_alt_m)
+        return ArduCopter(params, config.airframe, frame=LocalFrame(config.home))
+    return Autopilot(params, config.airframe, home_alt_m=home_alt_m, frame=LocalFrame(config.home))
 
 
 def make_params(config: VehicleConfig) -> ParameterStore:

@@ -221,6 +221,35 @@ def test_position_target_is_held_past_guid_timeout():
     assert (s.north_m, s.east_m, s.down_m) == pytest.approx((25.0, -10.0, -12.0), abs=0.4)
 
 
+def reposition(pilot: LockstepPilot, flags: int, x: int, y: int, z: float,
+               frame: int = mavlink.MAV_FRAME_GLOBAL_INT) -> int:
+    pilot.mav.command_int_send(1, 1, frame, mavlink.MAV_CMD_DO_REPOSITION, 0, 0, -1, flags, 0, math.nan, x, y, z)
+    return pilot.wait_message("COMMAND_ACK", 0.5, lambda m: m.command == mavlink.MAV_CMD_DO_REPOSITION).result
+
+
+def test_do_reposition_is_a_guided_position_target_as_arducopter_makes_it():
+    # GCS_MAVLINK_Copter::handle_command_int_do_reposition (docs/sitl.md): MAVSDK's goto_location on ArduPilot.
+    pilot = airborne()
+    vehicle = pilot.vehicle
+    lat, lon, _ = vehicle.frame.to_geodetic(40.0, 30.0, 0.0)
+    x, y = int(round(lat * 1e7)), int(round(lon * 1e7))
+    assert pilot.set_mode(CopterMode.LOITER) == ACCEPTED
+    assert reposition(pilot, 0, x, y, 15.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == DENIED  # no flag
+    assert vehicle.autopilot.mode is CopterMode.LOITER
+    assert reposition(pilot, 1, 0, 0, 15.0) == DENIED  # Location::sanitize: no position
+    assert reposition(pilot, 1, x, y, 15.0, mavlink.MAV_FRAME_LOCAL_NED) == DENIED  # not a global frame
+    assert reposition(pilot, 1, x, y, 15.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == ACCEPTED
+    assert vehicle.autopilot.mode is CopterMode.GUIDED
+    fly(pilot, 30.0)
+    s = vehicle.state
+    assert (s.north_m, s.east_m, -s.down_m) == pytest.approx((40.0, 30.0, 15.0), abs=0.5)
+    # In GUIDED no flag is needed; z in MAV_FRAME_GLOBAL_INT is AMSL. COMMAND_LONG is not ArduCopter's way.
+    assert reposition(pilot, 0, x, y, vehicle.config.home.alt_m + 8.0) == ACCEPTED
+    fly(pilot, 15.0)
+    assert -vehicle.state.down_m == pytest.approx(8.0, abs=0.4)
+    assert pilot.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 1, 0, 0, lat, lon, 20.0) == mavlink.MAV_RESULT_UNSUPPORTED
+
+
 def test_setpoints_outside_guided_are_ignored_and_invalid_ones_stop_the_vehicle():
     pilot = airborne()
     pilot.stream = (5.0, 0.0, 0.0, LOCAL_NED)

@@ -160,6 +160,49 @@ async def fly_offboard_example(port: int, server: VehicleServer) -> dict[str, tu
     return legs
 
 
+async def fly_goto_example(port: int, server: VehicleServer, target: tuple[float, float]) -> float:
+    """MAVSDK-Python's examples/goto.py with the 4.x API: wait for a global position, read home's AMSL altitude,
+    arm, take off, wait a second, goto_location 20 m above home. Returns the AMSL altitude it asked for."""
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    try:
+        await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
+        system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)
+        assert system is not None, "MAVSDK saw no autopilot"
+        action, telemetry = ActionAsync(system), TelemetryAsync(system)
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok, 20, "global position")
+        home = await first(telemetry.subscribe_home(), lambda h: True, T, "home")
+        await bounded(action.arm())
+        await bounded(action.takeoff())
+        await sim_sleep(1.0)
+        flying_alt = home.absolute_altitude_m + 20.0  # "to fly drone 20 m above the ground plane"
+        await bounded(action.goto_location(target[0], target[1], flying_alt, 0.0))
+        await first(telemetry.subscribe_position(),
+                    lambda p: abs(p.latitude_deg - target[0]) < 1e-5 and abs(p.longitude_deg - target[1]) < 1e-5
+                    and abs(p.absolute_altitude_m - flying_alt) < 1.0, 60, "the goto point")
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.HOLD, T, "HOLD there")
+        return flying_alt
+    finally:
+        if _inflight:
+            await asyncio.wait(set(_inflight), timeout=5)
+        drone.destroy()
+
+
+def test_mavsdk_goto_example_flies_to_the_point_and_holds(udp_ports):
+    # MAVSDK's goto_location is PX4's DO_REPOSITION (docs/sitl.md): the example's flow, to a point about 120 m
+    # from home (the example's own is 800 m away, 160 s of flight).
+    api_port, mavsdk_port = udp_ports[:2]
+    config = VehicleConfig(seed=7)
+    with VehicleServer(config, UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None),
+                       speed=SPEED) as server:
+        target = server.vehicle.frame.to_geodetic(70.0, -100.0, 0.0)[:2]
+        flying_alt = asyncio.run(asyncio.wait_for(fly_goto_example(mavsdk_port, server, target), 120))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        state = server.vehicle.state
+        assert math.hypot(state.north_m - 70.0, state.east_m + 100.0) < 1.5
+        assert config.home.alt_m - state.down_m == pytest.approx(flying_alt, abs=1.0)
+        assert server.vehicle.autopilot.armed and not state.on_ground
+
+
 def test_mavsdk_offboard_velocity_ned_example_flies_as_documented(udp_ports):
     api_port, mavsdk_port = udp_ports[:2]
     config = VehicleConfig(seed=6, boot_time_s=600.0)  # an autopilot that booted ten minutes earlier

@@ -18,6 +18,7 @@ TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 DENIED = mavlink.MAV_RESULT_DENIED
 UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+REPOSITION = mavlink.MAV_CMD_DO_REPOSITION
 
 
 @pytest.fixture
@@ -168,6 +169,72 @@ def test_command_int_is_handled_like_command_long(pilot):
                                0, 0, 0, 0, 0, 0, 0)
     ack = pilot.wait_message("COMMAND_ACK", 0.5)
     assert (ack.command, ack.result) == (mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, ACCEPTED)
+
+
+def command_int(pilot: LockstepPilot, command: int, params: tuple[float, float, float, float], x: int, y: int,
+                z: float) -> int:
+    """COMMAND_INT (MAV_FRAME_GLOBAL_INT) to the autopilot; returns the ACK's MAV_RESULT."""
+    pilot.mav.command_int_send(1, 1, mavlink.MAV_FRAME_GLOBAL_INT, command, 0, 0, *params, x, y, z)
+    return pilot.wait_message("COMMAND_ACK", 0.5, lambda m: m.command == command).result
+
+
+def scaled(degrees: float) -> int:
+    return int(round(degrees * 1e7))
+
+
+def test_do_reposition_flies_to_the_point_and_holds_there_as_px4_does(pilot):
+    # MAVSDK's goto_location: COMMAND_INT DO_REPOSITION, lat/lon * 1e7, AMSL altitude, param2 = the change-mode
+    # flag, param4 the heading in radians (Commander::handle_command, navigator_main.cpp; docs/sitl.md).
+    vehicle, home_alt = airborne(pilot).vehicle, pilot.vehicle.config.home.alt_m
+    lat, lon, _ = vehicle.frame.to_geodetic(60.0, -80.0, 0.0)  # 100 m away
+    before = vehicle.autopilot.hold_target
+    for flags in (0, 3):  # no change-mode flag, or an unknown bit: Commander refuses, nothing changes
+        assert command_int(pilot, REPOSITION, (-1, flags, 0, math.nan), scaled(lat), scaled(lon),
+                           home_alt + 25) == UNSUPPORTED
+    assert vehicle.autopilot.hold_target == before
+    assert command_int(pilot, REPOSITION, (-1, 1, 0, math.radians(90.0)), scaled(lat), scaled(lon),
+                       home_alt + 25) == ACCEPTED
+    top_speed = 0.0
+
+    def arrived() -> bool:
+        nonlocal top_speed
+        state = vehicle.state
+        top_speed = max(top_speed, math.hypot(state.vn_mps, state.ve_mps))
+        return math.hypot(state.north_m - 60.0, state.east_m + 80.0) < 1.0 and abs(-state.down_m - 25.0) < 0.5
+
+    took = pilot.wait_for(arrived, 60.0, "the reposition point")
+    assert vehicle.autopilot.mode is FlightMode.HOLD
+    assert top_speed == pytest.approx(vehicle.params["MPC_XY_CRUISE"], abs=0.3) and took > 100.0 / top_speed
+    assert math.degrees(vehicle.state.yaw_rad) == pytest.approx(90.0, abs=2.0)
+    pilot.vehicle.run(5.0)  # and holds there
+    assert math.hypot(vehicle.state.north_m - 60.0, vehicle.state.east_m + 80.0) < 1.0
+
+    # COMMAND_LONG: degrees as floats; param1 a ground speed; no altitude (NaN): the current one is kept.
+    lat, lon, _ = vehicle.frame.to_geodetic(60.0, -20.0, 0.0)
+    assert pilot.command(REPOSITION, 2.0, 1, 0, math.nan, lat, lon, math.nan) == ACCEPTED
+    pilot.vehicle.run(10.0)
+    assert math.hypot(vehicle.state.vn_mps, vehicle.state.ve_mps) == pytest.approx(2.0, abs=0.1)
+    assert -vehicle.state.down_m == pytest.approx(25.0, abs=0.5)
+    # No position (x = y = INT32_MAX): an altitude change where the vehicle is.
+    assert command_int(pilot, REPOSITION, (-1, 1, 0, math.nan), 2**31 - 1, 2**31 - 1, home_alt + 15) == ACCEPTED
+    north, east = vehicle.state.north_m, vehicle.state.east_m
+    pilot.wait_for(lambda: abs(-vehicle.state.down_m - 15.0) < 0.3, 30.0, "15 m")
+    assert math.hypot(vehicle.state.north_m - north, vehicle.state.east_m - east) < 2.0
+
+
+def test_do_reposition_on_the_ground_only_switches_to_hold(pilot):
+    vehicle, home_alt = pilot.vehicle, pilot.vehicle.config.home.alt_m
+    lat, lon, _ = vehicle.frame.to_geodetic(50.0, 0.0, 0.0)
+    assert pilot.command(mavlink.MAV_CMD_NAV_LAND) == ACCEPTED
+    assert command_int(pilot, REPOSITION, (-1, 1, 0, math.nan), scaled(lat), scaled(lon), home_alt + 20) == ACCEPTED
+    assert vehicle.autopilot.mode is FlightMode.HOLD  # Commander switched; Navigator ignores it disarmed
+    assert pilot.command(ARM, 1) == ACCEPTED
+    assert command_int(pilot, REPOSITION, (-1, 1, 0, math.nan), scaled(lat), scaled(lon), home_alt + 20) == ACCEPTED
+    pilot.vehicle.run(3.0)
+    assert vehicle.state.on_ground and vehicle.state.north_m == pytest.approx(0.0, abs=0.5)
+    # A NaN sent as an int in x and y: DENIED by mavlink_receiver.cpp before any of it; and a place off the globe.
+    assert command_int(pilot, REPOSITION, (-1, 1, 0, math.nan), 0x7FF80000, 0x7FF80000, home_alt) == DENIED
+    assert pilot.command(REPOSITION, -1, 1, 0, math.nan, 91.0, lon, home_alt) == DENIED
 
 
 def test_commands_for_other_systems_are_not_answered(pilot):
