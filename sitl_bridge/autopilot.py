@@ -12,15 +12,14 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import LocalFrame
-
 from sitl_bridge.autopilot_base import (
-    ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
-    MASK_YAW_RATE, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent, FlightStatus, Setpoint, as_int,
-    body_to_ned)
+    ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent,
+    FlightStatus, Setpoint, as_int)
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_modes import FlightMode, base_mode
+from sitl_bridge.px4_offboard import OffboardSetpoints
 
 __all__ = ["ACCEPTED", "DENIED", "FAILED", "TEMPORARILY_REJECTED", "UNSUPPORTED", "Autopilot", "AutopilotEvent",
            "Setpoint", "as_int"]
@@ -44,7 +43,7 @@ PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", Flig
                  FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
 
 
-class Autopilot(AutopilotBase):
+class Autopilot(OffboardSetpoints, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
@@ -263,60 +262,6 @@ class Autopilot(AutopilotBase):
         if mode is not None and base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             self.set_mode(mode, now, state, "SET_MODE")
         return None
-
-    # ----------------------------------------------------------------- offboard setpoints
-    def handle_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
-                        position: tuple[float, float, float], velocity: tuple[float, float, float],
-                        yaw: float, yaw_rate: float) -> bool:
-        """Accept one SET_POSITION_TARGET_LOCAL_NED; unsupported ones are counted by reason and ignored."""
-        reason = self._setpoint_problem(frame, mask)
-        is_velocity = (mask & MASK_POSITION) == MASK_POSITION
-        values = velocity if is_velocity else position
-        use_yaw = not mask & MASK_YAW
-        use_rate = not use_yaw and not mask & MASK_YAW_RATE
-        if reason is None and not all(math.isfinite(v) for v in values):
-            reason = "non-finite value"
-        if reason is None and ((use_yaw and not math.isfinite(yaw)) or (use_rate and not math.isfinite(yaw_rate))):
-            reason = "non-finite yaw"
-        if reason is not None:
-            self.setpoints_ignored[reason] += 1
-            return False
-        north, east, down = values
-        if frame == mavlink.MAV_FRAME_BODY_NED:  # x forward, y right: rotate by the current heading
-            north, east = body_to_ned(north, east, state.yaw_rad)
-            if not is_velocity:  # a body-frame position is an offset from where the vehicle is now
-                north, east, down = north + state.north_m, east + state.east_m, down + state.down_m
-        if is_velocity:
-            north, east, down = self._clamp_velocity(north, east, down)
-        self.setpoint = Setpoint(now, is_velocity, north, east, down,
-                                 yaw if use_yaw else None,
-                                 self._clamp_yaw_rate(yaw_rate) if use_rate else None)
-        return True
-
-    @staticmethod
-    def _setpoint_problem(frame: int, mask: int) -> str | None:
-        if frame not in (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_NED):
-            return f"frame {frame}"
-        if mask & MASK_ACCELERATION != MASK_ACCELERATION:
-            return "acceleration/force setpoint"
-        position_bits, velocity_bits = mask & MASK_POSITION, mask & MASK_VELOCITY
-        if position_bits not in (0, MASK_POSITION) or velocity_bits not in (0, MASK_VELOCITY):
-            return f"partial type_mask {mask}"
-        if (position_bits == 0) == (velocity_bits == 0):
-            return f"type_mask {mask}: need exactly one of position or velocity"
-        return None
-
-    def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:
-        limit = self.params["MPC_XY_VEL_MAX"]
-        speed = math.hypot(north, east)
-        if speed > limit:
-            north, east = north * limit / speed, east * limit / speed
-        down = min(max(down, -self.params["MPC_Z_VEL_MAX_UP"]), self.params["MPC_Z_VEL_MAX_DN"])
-        return north, east, down
-
-    def _clamp_yaw_rate(self, rate: float) -> float:
-        limit = math.radians(self.params["MPC_YAWRAUTO_MAX"])
-        return min(max(rate, -limit), limit)
 
     # ----------------------------------------------------------------- the control loop
     def guidance(self, now: float, state: VehicleState) -> VelocityCommand:
