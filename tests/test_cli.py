@@ -34,7 +34,7 @@ def test_help_states_real_defaults_once_and_no_empty_ones(command):
     result = run_cli(*command, "--help")
     text = " ".join(result.out.split())  # argparse wraps lines
     assert result.code == 0 and "--help" in text
-    assert "(default: None)" not in text and "(default: False)" not in text
+    assert "(default: None)" not in text and "(default: False)" not in text and "(default: [])" not in text
     assert not re.search(r"\(default[^)]*\) \(default", text), text  # never twice for one option
     if command == ["sitl"]:
         assert "--home HOME home as LAT,LON,ALT (degrees, degrees, metres AMSL) (default: 47.397742,8.545594,488.0)" \
