@@ -65,9 +65,8 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
     CAPABILITIES = CAPABILITIES
     FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
 
-    def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame | None = None):
-        super().__init__(params, airframe)
-        self.frame = frame  # the simulator's NED frame, for DO_REPOSITION's geodetic targets (None: not supported)
+    def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame):
+        super().__init__(params, airframe, frame)
         self.mode = CopterMode(int(params["INITIAL_MODE"]))
         self.land_complete = True
         self._ground_since_s = -math.inf
@@ -235,7 +234,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
             return ACCEPTED if self.set_mode(as_int(p[1], 0) & 0xFF, now, state, "DO_SET_MODE") else FAILED
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
-        if command == mavlink.MAV_CMD_DO_REPOSITION and frame is not None and self.frame is not None:
+        if command == mavlink.MAV_CMD_DO_REPOSITION and frame is not None:
             return self._reposition(p, frame, now, state)
         return UNSUPPORTED
 
@@ -243,7 +242,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         """GCS_MAVLINK_Copter::handle_command_int_do_reposition (a COMMAND_INT; x/y degrees * 1e7, z metres in the
         command's frame): outside GUIDED it needs param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (else DENIED); a
         latitude/longitude out of range or both zero (Location::sanitize), or a frame other than global (AMSL)
-        or relative to home, DENIED; then GUIDED flies to the point at WPNAV_SPEED and holds (no yaw change);
+        or relative to home (ArduPilot also takes terrain frames; no terrain is simulated), DENIED; then GUIDED flies to the point at WPNAV_SPEED and holds (no yaw change);
         FAILED if GUIDED cannot be entered. Armed on the ground the point is not taken (not checked against
         ArduPilot: a GUIDED takeoff replaces it there anyway)."""
         change_mode = as_int(p[1], 0) & 1
@@ -253,7 +252,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         if abs(x) > 90e7 or abs(y) > 180e7 or (x == 0 and y == 0) or not math.isfinite(z):
             return DENIED
         if frame in (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT):
-            down = self.frame.home.alt_m - z
+            down = self.down_of(z)
         elif frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
             down = self.home_ned[2] - z
         else:
@@ -261,8 +260,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         if not self.set_mode(CopterMode.GUIDED, now, state, "DO_REPOSITION"):
             return FAILED
         if self.armed and not state.on_ground:
-            north, east, _ = self.frame.to_ned(x / 1e7, y / 1e7, self.frame.home.alt_m - state.down_m)
-            self.setpoint = Setpoint(now, False, north, east, down)
+            self.setpoint = Setpoint(now, False, *self.ned_of(x / 1e7, y / 1e7), down)
         return ACCEPTED
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:

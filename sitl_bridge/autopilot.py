@@ -51,11 +51,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
     CAPABILITIES = CAPABILITIES
     FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
 
-    def __init__(self, params: ParameterStore, airframe: MultirotorParams, home_alt_m: float,
-                 frame: LocalFrame | None = None):
-        super().__init__(params, airframe)
-        self.home_alt_m = home_alt_m  # AMSL; NAV_TAKEOFF's param7 is an AMSL altitude in PX4
-        self.frame = frame  # the simulator's NED frame, for DO_REPOSITION's geodetic targets (None: not supported)
+    def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame):
+        super().__init__(params, airframe, frame)
+        self.home_alt_m = frame.home.alt_m  # AMSL (moves with home); NAV_TAKEOFF's param7 is an AMSL altitude in PX4
         self.mode = FlightMode.HOLD
         self.hold_target: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.hold_speed_mps: float | None = None  # a reposition's ground speed (None: MPC_XY_CRUISE)
@@ -205,7 +203,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return self.set_mode(mode, now, state, "DO_SET_MODE", source_component)
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
-        if command == mavlink.MAV_CMD_DO_REPOSITION and self.frame is not None:
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
             return self._reposition(p, frame, now, state)
         return UNSUPPORTED
 
@@ -245,11 +243,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         result = self.set_mode(FlightMode.HOLD, now, state, "DO_REPOSITION")
         if not self.armed or state.on_ground:
             return result
-        north, east, down = state.north_m, state.east_m, state.down_m
-        if math.isfinite(lat) and math.isfinite(lon):
-            north, east, _ = self.frame.to_ned(lat, lon, self.frame.home.alt_m - state.down_m)
-        if math.isfinite(p[6]):
-            down = self.frame.home.alt_m - p[6]
+        north, east = (self.ned_of(lat, lon) if math.isfinite(lat) and math.isfinite(lon)
+                       else (state.north_m, state.east_m))
+        down = self.down_of(p[6]) if math.isfinite(p[6]) else state.down_m
         self.hold_target = (north, east, down)
         self.hold_speed_mps = p[0] if math.isfinite(p[0]) and p[0] > 0.0 else None
         self.hold_yaw_rad = p[3] if math.isfinite(p[3]) else None

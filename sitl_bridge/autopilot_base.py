@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from missions.geodesy import LocalFrame
 from sitl_bridge.multirotor import MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
@@ -114,9 +115,10 @@ class AutopilotBase:
     PARAMS_BYTEWISE = False
     """True: integer parameters travel with their bytes in the float field (PX4); False: as float values."""
 
-    def __init__(self, params: ParameterStore, airframe: MultirotorParams):
+    def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame):
         self.params = params
         self.airframe = airframe
+        self.frame = frame  # the simulator's NED frame (origin: the configured home), for geodetic targets
         self.armed = False
         self.gps_ok = False  # set by the vehicle from the sensors
         self.events: list[AutopilotEvent] = []
@@ -126,6 +128,16 @@ class AutopilotBase:
         self.zoom_percent = 0.0
         self.setpoint: Setpoint | None = None
         self.setpoints_ignored: Counter[str] = Counter()
+
+    def ned_of(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
+        """(north, east) in the simulator's frame of a latitude and longitude (taken at home's altitude: the
+        difference at the vehicle's is about a centimetre per 100 m of height, a kilometre out)."""
+        north, east, _ = self.frame.to_ned(lat_deg, lon_deg, self.frame.home.alt_m)
+        return north, east
+
+    def down_of(self, alt_amsl_m: float) -> float:
+        """The simulator frame's down of an AMSL altitude (flat, as the vehicle's own altitude is)."""
+        return self.frame.home.alt_m - alt_amsl_m
 
     def _event(self, now: float, text: str, severity: int = mavlink.MAV_SEVERITY_INFO, broadcast: bool = True) -> None:
         self.events.append(AutopilotEvent(now, text, severity, broadcast))

@@ -35,11 +35,11 @@ from sitl_bridge.vehicle_config import VehicleConfig
 from sitl_bridge.vehicle_messages import MessageHandlers
 
 
-def make_autopilot(config: VehicleConfig, params: ParameterStore, home_alt_m: float) -> AutopilotBase:
-    """A freshly booted autopilot of the configured personality."""
+def make_autopilot(config: VehicleConfig, params: ParameterStore, frame: LocalFrame) -> AutopilotBase:
+    """A freshly booted autopilot of the configured personality, in the simulator's NED ``frame``."""
     if config.autopilot == "ardupilot":
-        return ArduCopter(params, config.airframe, frame=LocalFrame(config.home))
-    return Autopilot(params, config.airframe, home_alt_m=home_alt_m, frame=LocalFrame(config.home))
+        return ArduCopter(params, config.airframe, frame)
+    return Autopilot(params, config.airframe, frame)
 
 
 def make_params(config: VehicleConfig) -> ParameterStore:
@@ -73,7 +73,7 @@ class SimulatedVehicle(MessageHandlers):
         self.is_ardupilot = config.autopilot == "ardupilot"
         self.telemetry_profile = resolve_profile(config.telemetry_profile, config.autopilot)
         self.params = make_params(config)
-        self.autopilot = make_autopilot(config, self.params, config.home.alt_m)
+        self.autopilot = make_autopilot(config, self.params, self.frame)
         self.links = list(links)
         self.endpoints = self._make_endpoints()
         self.on_event = on_event
@@ -221,7 +221,7 @@ class SimulatedVehicle(MessageHandlers):
         self._down_until_tick = None
         state = self.state
         here = (state.north_m, state.east_m, state.down_m)
-        self.autopilot = make_autopilot(self.config, self.params, self.config.home.alt_m)
+        self.autopilot = make_autopilot(self.config, self.params, self.frame)
         self.autopilot.gps_ok = self.sensors.gps is not None
         self.endpoints = self._make_endpoints()
         if self.signing is not None:
