@@ -16,6 +16,10 @@ every other step. Inputs cycle through observations recorded in the environment.
 (--blocks) so that a change of machine load hits them alike. Figures: p50 and p99 of wall-clock time per call (and
 of this thread's CPU time, less sensitive to other processes on a shared machine), in microseconds.
 
+Reference, timed in the same blocks on the same thread: four bare 512 x 512 float32 ``F.linear`` calls at batch 1
+(about the paper actor's matrix products, nothing else), which says how much of the target the machine itself
+leaves.
+
 Lower bound: the multiply-adds of the networks' Linear layers (2 FLOP each) at the peak FLOP rate of one thread,
 measured in the same run as the best of several 1024 x 1024 float32 matmuls. Target: combined-step p99 <= 250 us at
 the paper preset.
@@ -28,6 +32,7 @@ import argparse
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +85,20 @@ def timed_calls(step, inputs: list[tuple[np.ndarray, np.ndarray]], count: int) -
     return wall, cpu
 
 
+def bare_linear_reference() -> Callable[[np.ndarray, np.ndarray], None]:
+    """A step of four bare 512 x 512 float32 F.linear calls at batch 1 (inputs ignored), under inference mode."""
+    weights = [torch.randn(512, 512) for _ in range(4)]
+    row = torch.randn(1, 512)
+
+    def step(obs: np.ndarray, meta_obs: np.ndarray) -> None:
+        with torch.inference_mode():
+            hidden = row
+            for weight in weights:
+                hidden = torch.nn.functional.linear(hidden, weight)
+
+    return step
+
+
 def percentiles(values: list[float]) -> dict[str, float]:
     return {"p50": float(np.percentile(values, 50)), "p99": float(np.percentile(values, 99))}
 
@@ -97,7 +116,10 @@ def measure(policy: CheckpointPolicy, steps: int, blocks: int, folder: Path) -> 
     obs = record_observations(policy, count=500, envs=50)
     inputs = [(row[None, :], row[None, :META_OBS_DIM]) for row in obs]
     samples = {(r, c, kind): [] for r in RUNNERS for c in CALLS for kind in ("wall", "cpu")}
+    reference, reference_wall = bare_linear_reference(), []
+    timed_calls(reference, inputs, 200)
     for block in range(blocks):
+        reference_wall += timed_calls(reference, inputs, max(1, steps // blocks))[0]
         for runner in RUNNERS:
             select_goal, act = runners[runner]
             calls = {"combined": lambda o, m: (select_goal(m), act(o)), "act": lambda o, m: act(o),
@@ -113,7 +135,8 @@ def measure(policy: CheckpointPolicy, steps: int, blocks: int, folder: Path) -> 
     macs = {"act": linear_macs(module.action_head), "select_goal": linear_macs(module.goal_head)}
     macs["combined"] = macs["act"] + macs["select_goal"]
     return {"actor_layers": list(policy.config.actor.layers), "meta_layers": list(policy.config.meta_actor.layers),
-            "linear_macs": macs, "artifact_bytes": sizes, "latency_us": latency}
+            "linear_macs": macs, "artifact_bytes": sizes, "latency_us": latency,
+            "reference_four_512x512_linear_us": percentiles(reference_wall)}
 
 
 def main() -> int:
@@ -148,6 +171,8 @@ def main() -> int:
                 cells = "".join(f" {result['latency_us'][r][call]['wall']['p50']:12.1f}/"
                                 f"{result['latency_us'][r][call]['wall']['p99']:<12.1f}" for r in RUNNERS)
                 print(f"  {call:12s} {bound[call]:9.1f} us{cells}")
+            ref = result["reference_four_512x512_linear_us"]
+            print(f"  reference, four bare 512 x 512 F.linear at batch 1: p50 {ref['p50']:.1f} / p99 {ref['p99']:.1f} us")
             if name == TARGET_PRESET:
                 verdict = {r: result["latency_us"][r]["combined"]["wall"]["p99"] <= TARGET_P99_US for r in RUNNERS}
                 report["meets_target"] = verdict
