@@ -247,7 +247,7 @@ def test_hrlsac_train_trains_one_run_of_a_sweep_file_as_the_sweep_does(sweep_run
     assert log_rows(trained / "progress.csv") == log_rows(run / "progress.csv")
     assert_same_state(torch.load(trained / "checkpoint.pt", weights_only=False),
                       torch.load(run / "checkpoint.pt", weights_only=False))
-    # The sweep would now skip it; a changed sweep file is refused on --resume, naming the field.
+    # A changed sweep file is refused on --resume, naming the field.
     changed = tmp_path / "changed.yaml"
     changed.write_text(json.dumps({**SWEEP, "set": {**SMALL, "batch_size": 16}}))
     result = subprocess.run([*HRLSAC, "train", "--sweep", str(changed), "--run", KILLED, "--out", str(trained),
