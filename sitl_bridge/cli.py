@@ -10,6 +10,7 @@ import time
 from missions.cli_help import HelpFormatter
 from missions.geodesy import GeoPoint
 from missions.signing import load_key_file
+from sitl_bridge.ardupilot_params import STREAM_GROUPS, STREAM_LINKS
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
@@ -180,8 +181,7 @@ def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleSer
                   f"udpin:0.0.0.0:{ports.api_remote_port} or udpout:{host}:{ports.api_port}")
     profile = resolve_profile(config.telemetry_profile, config.autopilot)
     if profile == "ardupilot":
-        print("  telemetry: ArduPilot defaults (SRn_* = 0): only HEARTBEAT until a client sends REQUEST_DATA_STREAM "
-              "or MAV_CMD_SET_MESSAGE_INTERVAL")
+        print_ardupilot_streams(server)
     else:
         print(f"  telemetry profile: {profile}")
     if config.boot_time_s or config.reboot_at_s is not None:
@@ -194,3 +194,23 @@ def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleSer
     if args.link_faults:
         print(f"  link faults: {parse_link_faults(args.link_faults).describe()} (UDP links, wall clock from start)")
     print("Ctrl-C stops.", flush=True)
+
+
+def print_ardupilot_streams(server: VehicleServer) -> None:
+    """The SRn_* stream rates of each link, and what a MAVSDK user must add when the companion link streams no
+    SYS_STATUS (MAVSDK asks ArduPilot for no stream; its ``telemetry.health()`` is read from SYS_STATUS)."""
+    params = server.vehicle.params
+    streaming = {index: {group: params[f"SR{index}_{group}"] for group in STREAM_GROUPS
+                         if params[f"SR{index}_{group}"] > 0}
+                 for index in range(min(len(server.links), STREAM_LINKS))}
+    if not any(streaming.values()):
+        print("  telemetry: ArduPilot defaults (SRn_* = 0): only HEARTBEAT until a client sends REQUEST_DATA_STREAM "
+              "or MAV_CMD_SET_MESSAGE_INTERVAL")
+    for index, rates in streaming.items():
+        if rates:
+            print(f"  telemetry: SR{index}_* " + ", ".join(f"{group} {rate:g} Hz" for group, rate in rates.items()))
+    companion = next((i for i, link in enumerate(server.links) if link.name == "api"), None)
+    if companion is not None and companion < STREAM_LINKS and not streaming[companion].get("EXT_STAT"):
+        print(f"  MAVSDK on the companion link: it requests no streams from ArduPilot, so telemetry.health() never "
+              f"reports a global position; start with --param SR{companion}_EXT_STAT=2 --param SR{companion}_POSITION=5 "
+              f"--param SR{companion}_EXTRA1=4 (docs/sitl.md, \"MAVSDK and ArduPilot\")")

@@ -7,7 +7,8 @@ Every await is bounded; the vehicle runs at 2x real time to keep the test short.
 gone (constructing it raises TypeError with a migration hint). MAVSDK's documented offboard example
 (MAVSDK-Python examples/offboard_velocity_ned.py) is therefore flown here with the 4.x API: the same sequence of
 calls (connect, wait for global position and home, arm, one initial setpoint, start offboard at once, velocity
-legs, stop offboard), then land.
+legs, stop offboard), then land. Against the ArduPilot personality: takeoff, goto and land once the companion link
+streams (ArduPilot's documented SRx_ fix), and what MAVSDK knows without (docs/sitl.md, "MAVSDK and ArduPilot").
 """
 from __future__ import annotations
 
@@ -61,13 +62,25 @@ async def sim_sleep(seconds: float) -> None:
     await asyncio.sleep(seconds / SPEED)
 
 
-async def fly(port: int, server: VehicleServer) -> None:
-    vehicle = server.vehicle
+@contextlib.asynccontextmanager
+async def autopilot_at(port: int):
+    """MAVSDK listening on ``port`` until it sees the autopilot ("Waiting for drone to connect..."); yields that
+    system. MAVSDK is destroyed afterwards, never under a blocked call (it times its own calls out within 3 s)."""
     drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     try:
         await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
         system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)
         assert system is not None, "MAVSDK saw no autopilot"
+        yield system
+    finally:
+        if _inflight:
+            await asyncio.wait(set(_inflight), timeout=5)
+        drone.destroy()
+
+
+async def fly(port: int, server: VehicleServer) -> None:
+    vehicle = server.vehicle
+    async with autopilot_at(port) as system:
         action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
 
         await first(telemetry.subscribe_health(),
@@ -114,22 +127,14 @@ async def fly(port: int, server: VehicleServer) -> None:
         await first(telemetry.subscribe_landed_state(), lambda s: s == LandedState.ON_GROUND, 60, "landed")
         await first(telemetry.subscribe_armed(), lambda armed: not armed, 20, "disarmed")
         assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.0  # back home
-    finally:
-        if _inflight:  # never destroy under a blocked call; MAVSDK times its own calls out within 3 s
-            await asyncio.wait(set(_inflight), timeout=5)
-        drone.destroy()
 
 
 async def fly_offboard_example(port: int, server: VehicleServer) -> dict[str, tuple[float, ...]]:
     """MAVSDK's offboard_velocity_ned.py, step for step (sleeps in simulated seconds); returns each leg's
     ground velocity (north, east, down, m/s), heading (deg) and altitude (m) at its end, by leg name."""
     vehicle = server.vehicle
-    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     legs = {}
-    try:
-        await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
-        system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)  # "Waiting for drone to connect..."
-        assert system is not None, "MAVSDK saw no autopilot"
+    async with autopilot_at(port) as system:
         action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
         await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
                     20, "global position estimate")
@@ -153,21 +158,13 @@ async def fly_offboard_example(port: int, server: VehicleServer) -> dict[str, tu
         await bounded(action.land())
         await first(telemetry.subscribe_landed_state(), lambda s: s == LandedState.ON_GROUND, 60, "landed")
         await first(telemetry.subscribe_armed(), lambda armed: not armed, 20, "disarmed")
-    finally:
-        if _inflight:
-            await asyncio.wait(set(_inflight), timeout=5)
-        drone.destroy()
     return legs
 
 
 async def fly_goto_example(port: int, server: VehicleServer, target: tuple[float, float]) -> float:
     """MAVSDK-Python's examples/goto.py with the 4.x API: wait for a global position, read home's AMSL altitude,
     arm, take off, wait a second, goto_location 20 m above home. Returns the AMSL altitude it asked for."""
-    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    try:
-        await bounded(drone.add_any_connection(f"udpin://0.0.0.0:{port}"))
-        system = await bounded(drone.first_autopilot(timeout_s=T), T + 2)
-        assert system is not None, "MAVSDK saw no autopilot"
+    async with autopilot_at(port) as system:
         action, telemetry = ActionAsync(system), TelemetryAsync(system)
         await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok, 20, "global position")
         home = await first(telemetry.subscribe_home(), lambda h: True, T, "home")
@@ -181,10 +178,6 @@ async def fly_goto_example(port: int, server: VehicleServer, target: tuple[float
                     and abs(p.absolute_altitude_m - flying_alt) < 1.0, 60, "the goto point")
         await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.HOLD, T, "HOLD there")
         return flying_alt
-    finally:
-        if _inflight:
-            await asyncio.wait(set(_inflight), timeout=5)
-        drone.destroy()
 
 
 def test_mavsdk_goto_example_flies_to_the_point_and_holds(udp_ports):
@@ -228,3 +221,83 @@ def test_mavsdk_flies_takeoff_offboard_ned_and_body_rtl_and_land(udp_ports):
         asyncio.run(asyncio.wait_for(fly(mavsdk_port, server), 150))
         assert server.error is None
         assert server.vehicle.handler_errors == 0
+
+
+# --- MAVSDK and the ArduPilot personality -------------------------------------------------------------------------
+# ArduCopter streams nothing until asked (SRn_* = 0) and MAVSDK asks ArduPilot for no stream: its health flags come
+# from SYS_STATUS alone (MAVSDK telemetry_impl.cpp, process_sys_status). ArduPilot's documented fix for a companion
+# computer is to set the link's SRx_ parameters (ardupilot.org/dev/docs/mavlink-requesting-data.html); docs/sitl.md.
+COMPANION_STREAMS = {"SR0_EXT_STAT": 2.0, "SR0_POSITION": 5.0, "SR0_EXTRA1": 4.0}  # the API link is link 0 here
+
+
+def ardupilot_server(udp_ports: list[int], seed: int, params: dict[str, float]) -> tuple[VehicleServer, int]:
+    api_port, mavsdk_port = udp_ports[:2]
+    config = VehicleConfig(seed=seed, autopilot="ardupilot", params=params)
+    ports = UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None)
+    return VehicleServer(config, ports, speed=SPEED), mavsdk_port
+
+
+async def fly_ardupilot_takeoff_goto_land(port: int, server: VehicleServer, north_m: float) -> list[str]:
+    """MAVSDK-Python's takeoff_and_land.py (wait for a global position and home, arm, take off, land) with
+    ArduPilot's own example's takeoff altitude (ArduPilot/ardupilot-mavsdk examples/actions/actions.cpp:
+    set_takeoff_altitude(10)) and a goto_location ``north_m`` north at the same altitude between takeoff and
+    landing. Returns the vehicle's mode after each step."""
+    vehicle = server.vehicle
+    modes = []
+    async with autopilot_at(port) as system:
+        action, telemetry = ActionAsync(system), TelemetryAsync(system)
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok, 20,
+                    "a global position and home")
+        await bounded(action.arm())
+        modes.append(vehicle.autopilot.status.mode_name)
+        await bounded(action.set_takeoff_altitude(10.0))
+        await bounded(action.takeoff())  # MAVSDK switches ArduPilot to GUIDED, then NAV_TAKEOFF with param7 10 m
+        modes.append(vehicle.autopilot.status.mode_name)
+        here = await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 9.5, 30, "10 m up")
+        target = vehicle.frame.to_geodetic(vehicle.state.north_m + north_m, vehicle.state.east_m, 0.0)[:2]
+        await bounded(action.goto_location(target[0], target[1], here.absolute_altitude_m, 0.0))
+        modes.append(vehicle.autopilot.status.mode_name)
+        await first(telemetry.subscribe_position(),
+                    lambda p: abs(p.latitude_deg - target[0]) < 1e-5 and abs(p.longitude_deg - target[1]) < 1e-5,
+                    60, "the goto point")
+        await bounded(action.land())
+        modes.append(vehicle.autopilot.status.mode_name)
+        await first(telemetry.subscribe_in_air(), lambda in_air: not in_air, 60, "on the ground")
+        await first(telemetry.subscribe_armed(), lambda armed: not armed, 30, "disarmed by the autopilot")
+        return modes
+
+
+def test_mavsdk_flies_ardupilot_take_off_goto_and_land_once_the_companion_link_streams(udp_ports):
+    server, mavsdk_port = ardupilot_server(udp_ports, seed=8, params=COMPANION_STREAMS)
+    with server:
+        start = server.vehicle.state
+        modes = asyncio.run(asyncio.wait_for(fly_ardupilot_takeoff_goto_land(mavsdk_port, server, 60.0), 180))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        state = server.vehicle.state
+    assert modes == ["STABILIZE", "GUIDED", "GUIDED", "LAND"]  # armed in STABILIZE, ArduCopter's INITIAL_MODE 0
+    assert math.hypot(state.north_m - start.north_m - 60.0, state.east_m - start.east_m) < 1.5  # landed there
+    assert state.on_ground and not server.vehicle.autopilot.armed
+
+
+async def health_when_home_arrives(port: int, server: VehicleServer):
+    """MAVSDK's health at the moment home is known, then ArduPilot's own example's first step (arm without
+    waiting for health: ardupilot-mavsdk examples/actions/actions.cpp comments that wait out)."""
+    async with autopilot_at(port) as system:
+        action, telemetry = ActionAsync(system), TelemetryAsync(system)
+        health = await first(telemetry.subscribe_health(), lambda h: h.is_home_position_ok, 20, "home")
+        await bounded(action.arm())
+        return health
+
+
+def test_mavsdk_on_a_default_ardupilot_knows_home_but_no_health_and_can_still_arm(udp_ports):
+    # Home comes from MAVSDK's own HOME_POSITION request; nothing sends SYS_STATUS, so every health flag read from
+    # it stays at MAVSDK's default, False, although the vehicle is armable (the arm succeeds).
+    server, mavsdk_port = ardupilot_server(udp_ports, seed=9, params={})
+    with server:
+        health = asyncio.run(asyncio.wait_for(health_when_home_arrives(mavsdk_port, server), 60))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        armed = server.vehicle.autopilot.armed
+    assert health.is_home_position_ok
+    assert not (health.is_global_position_ok or health.is_local_position_ok or health.is_armable
+                or health.is_gyrometer_calibration_ok)
+    assert armed

@@ -4,6 +4,8 @@ Bad input is one line on stderr and exit code 2, before any socket is opened.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from sitl_bridge import cli
@@ -56,3 +58,28 @@ def test_px4_keeps_its_sitl_ports_and_its_failsafe_flag():
     ports = cli.ports_from_args(args)
     assert (ports.api_port, ports.api_remote_port, ports.gcs_port, ports.gcs_remote_port, ports.tcp_port) == (
         14580, 14540, 18570, 14550, None)
+
+
+def banner(capsys, server_params: dict[str, float], udp_ports: list[int]) -> list[str]:
+    """The ``hrlsac sitl`` banner's telemetry lines of an ArduPilot vehicle (links: GCS, then companion)."""
+    from sitl_bridge.server import UdpPorts, VehicleServer
+
+    args = cli.build_parser("hrlsac sitl").parse_args(["--autopilot", "ardupilot"])
+    config = dataclasses.replace(cli.config_from_args(args), params=server_params)
+    ports = UdpPorts(api_port=udp_ports[0], api_remote_port=udp_ports[1], gcs_port=udp_ports[2],
+                     gcs_remote_port=udp_ports[3])
+    server = VehicleServer(config, ports)
+    try:
+        cli.print_connections(config, ports, server, args)
+    finally:
+        for link in server.links:
+            link.close()
+    return [line.strip() for line in capsys.readouterr().out.splitlines() if "telemetry" in line or "MAVSDK on" in line]
+
+
+def test_the_ardupilot_banner_says_what_streams_and_what_mavsdk_needs(capsys, udp_ports):
+    lines = banner(capsys, {}, udp_ports)  # without a TCP port the API link is link 0 and the GCS link 1
+    assert lines[0].startswith("telemetry: ArduPilot defaults (SRn_* = 0)")
+    assert lines[1].startswith("MAVSDK on the companion link") and "--param SR0_EXT_STAT=2" in lines[1]
+    lines = banner(capsys, {"SR0_EXT_STAT": 2.0, "SR0_POSITION": 5.0, "SR1_EXTRA1": 4.0}, udp_ports)
+    assert lines == ["telemetry: SR0_* EXT_STAT 2 Hz, POSITION 5 Hz", "telemetry: SR1_* EXTRA1 4 Hz"]
