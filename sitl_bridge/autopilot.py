@@ -298,7 +298,11 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return VelocityCommand(sp.north, sp.east, sp.down, sp.yaw_rad, sp.yaw_rate_rad_s)
         command = velocity_toward(state, sp.north, sp.east, sp.down, self.airframe,
                                   speed_xy_mps=self.params["MPC_XY_VEL_MAX"])
-        return VelocityCommand(command.north_mps, command.east_mps, command.down_mps, sp.yaw_rad, sp.yaw_rate_rad_s)
+        north, east, down = command.north_mps, command.east_mps, command.down_mps
+        if sp.feedforward is not None:  # PX4's PositionControl: P output + feed-forward, then the limits
+            north, east, down = self._clamp_velocity(north + sp.feedforward[0], east + sp.feedforward[1],
+                                                     down + sp.feedforward[2])
+        return VelocityCommand(north, east, down, sp.yaw_rad, sp.yaw_rate_rad_s)
 
     def _landing_command(self, state: VehicleState, north: float, east: float) -> VelocityCommand:
         """Descend over (north, east), slowing from MPC_Z_V_AUTO_DN to MPC_LAND_SPEED between ALT1 and ALT2."""

@@ -71,6 +71,8 @@ class Setpoint:
     down: float
     yaw_rad: float | None = None
     yaw_rate_rad_s: float | None = None
+    feedforward: tuple[float, float, float] | None = None
+    """A position setpoint's velocity feed-forward (NED, m/s), added to the position controller's output."""
 
 
 @dataclass(frozen=True)

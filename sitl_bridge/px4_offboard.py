@@ -23,10 +23,13 @@ class OffboardSetpoints:
         """Accept one SET_POSITION_TARGET_LOCAL_NED; unsupported ones are counted by reason and ignored."""
         reason = self._setpoint_problem(frame, mask)
         is_velocity = (mask & MASK_POSITION) == MASK_POSITION
+        # position + velocity (MAVSDK's set_position_velocity_ned): PX4 flies the position with the velocity as
+        # the position controller's feed-forward
+        with_feedforward = not is_velocity and not mask & MASK_VELOCITY
         values = velocity if is_velocity else position
         use_yaw = not mask & MASK_YAW
         use_rate = not use_yaw and not mask & MASK_YAW_RATE
-        if reason is None and not all(math.isfinite(v) for v in values):
+        if reason is None and not all(math.isfinite(v) for v in values + (velocity if with_feedforward else ())):
             reason = "non-finite value"
         if reason is None and ((use_yaw and not math.isfinite(yaw)) or (use_rate and not math.isfinite(yaw_rate))):
             reason = "non-finite yaw"
@@ -42,7 +45,8 @@ class OffboardSetpoints:
             north, east, down = self._clamp_velocity(north, east, down)
         self.setpoint = Setpoint(now, is_velocity, north, east, down,
                                  yaw if use_yaw else None,
-                                 self._clamp_yaw_rate(yaw_rate) if use_rate else None)
+                                 self._clamp_yaw_rate(yaw_rate) if use_rate else None,
+                                 tuple(velocity) if with_feedforward else None)
         return True
 
     @staticmethod
@@ -54,8 +58,10 @@ class OffboardSetpoints:
         position_bits, velocity_bits = mask & MASK_POSITION, mask & MASK_VELOCITY
         if position_bits not in (0, MASK_POSITION) or velocity_bits not in (0, MASK_VELOCITY):
             return f"partial type_mask {mask}"
-        if (position_bits == 0) == (velocity_bits == 0):
-            return f"type_mask {mask}: need exactly one of position or velocity"
+        if position_bits and velocity_bits:
+            return f"type_mask {mask}: neither position nor velocity"
+        if not position_bits and not velocity_bits and frame != mavlink.MAV_FRAME_LOCAL_NED:
+            return f"type_mask {mask}: position + velocity only in MAV_FRAME_LOCAL_NED"
         return None
 
     def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:

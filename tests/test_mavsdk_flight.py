@@ -21,7 +21,8 @@ import pytest
 mavsdk = pytest.importorskip("mavsdk.asyncio")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
-from mavsdk.asyncio.plugins.offboard import OffboardAsync, VelocityBodyYawspeed, VelocityNedYaw  # noqa: E402
+from mavsdk.asyncio.plugins.offboard import (  # noqa: E402
+    OffboardAsync, PositionNedYaw, VelocityBodyYawspeed, VelocityNedYaw)
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync  # noqa: E402
 
 from sitl_bridge.server import UdpPorts, VehicleServer  # noqa: E402
@@ -223,18 +224,84 @@ def test_mavsdk_flies_takeoff_offboard_ned_and_body_rtl_and_land(udp_ports):
         assert server.vehicle.handler_errors == 0
 
 
+
+def vehicle_server(udp_ports: list[int], seed: int, autopilot: str = "px4",
+                   params: dict[str, float] | None = None) -> tuple[VehicleServer, int]:
+    """A vehicle whose API link talks to MAVSDK on the second port (not started); returns it and that port."""
+    api_port, mavsdk_port = udp_ports[:2]
+    config = VehicleConfig(seed=seed, autopilot=autopilot, params=params or {})
+    ports = UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None)
+    return VehicleServer(config, ports, speed=SPEED), mavsdk_port
+
+
+async def fly_position_examples(port: int, server: VehicleServer, with_velocity: bool) -> list[tuple[float, ...]]:
+    """MAVSDK-Python's offboard_position_ned.py (arm at once, position legs, stop offboard) or, ``with_velocity``,
+    offboard_position_velocity_ned.py (wait for health, arm, position + velocity legs, land, stop offboard), step
+    for step with sleeps in simulated seconds. Returns (north, east, down, heading deg) at the end of each leg."""
+    vehicle = server.vehicle
+    legs = []
+    async with autopilot_at(port) as system:
+        action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
+        if with_velocity:
+            await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                        20, "global position estimate")
+        await bounded(action.arm())
+        await bounded(offboard.set_position_ned(PositionNedYaw(0.0, 0.0, 0.0, 0.0)))  # "-- Setting initial setpoint"
+        await bounded(offboard.start())
+        if with_velocity:
+            steps = [((0.0, 0.0, -10.0, 0.0), (0.0, 0.0, -1.0, 0.0), 10.0),
+                     ((50.0, 0.0, -10.0, 0.0), (1.0, 0.0, 0.0, 0.0), 20.0)]
+        else:
+            steps = [((0.0, 0.0, -5.0, 0.0), None, 10.0), ((5.0, 0.0, -5.0, 90.0), None, 10.0),
+                     ((5.0, 10.0, -5.0, 90.0), None, 15.0), ((0.0, 10.0, 0.0, 180.0), None, 10.0)]
+        for position, velocity, seconds in steps:
+            if velocity is None:
+                await bounded(offboard.set_position_ned(PositionNedYaw(*position)))
+            else:
+                await bounded(offboard.set_position_velocity_ned(PositionNedYaw(*position), VelocityNedYaw(*velocity)))
+            await sim_sleep(seconds)
+            state = vehicle.state
+            legs.append((state.north_m, state.east_m, state.down_m, math.degrees(state.yaw_rad) % 360.0))
+        if with_velocity:
+            await bounded(action.land())
+        await bounded(offboard.stop())  # MAVSDK's stop switches to Hold, even from LAND
+        return legs
+
+
+def flown_position_example(udp_ports: list[int], seed: int, with_velocity: bool) -> tuple[list, str]:
+    """:func:`fly_position_examples` against a PX4 vehicle: the legs and the mode the example left it in. Every
+    setpoint MAVSDK streamed was taken."""
+    server, mavsdk_port = vehicle_server(udp_ports, seed)
+    with server:
+        legs = asyncio.run(asyncio.wait_for(fly_position_examples(mavsdk_port, server, with_velocity), 120))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        assert not server.vehicle.autopilot.setpoints_ignored
+        return legs, server.vehicle.autopilot.status.mode_name
+
+
+def test_mavsdk_offboard_position_ned_example_flies_as_documented(udp_ports):
+    legs, _ = flown_position_example(udp_ports, 10, with_velocity=False)
+    expected = [(0.0, 0.0, -5.0, 0.0), (5.0, 0.0, -5.0, 90.0), (5.0, 10.0, -5.0, 90.0), (0.0, 10.0, 0.0, 180.0)]
+    for flown, (north, east, down, heading) in zip(legs, expected):
+        assert flown[:3] == pytest.approx((north, east, down), abs=0.3)
+        assert abs((flown[3] - heading + 180.0) % 360.0 - 180.0) < 2.0
+
+
+def test_mavsdk_offboard_position_velocity_ned_example_flies_the_positions_with_feedforward(udp_ports):
+    # set_position_velocity_ned sends both groups; PX4 flies the position with the velocity as feed-forward, so
+    # each leg settles about v_ff / MPC_XY_P (about 1 m) beyond its point along the feed-forward.
+    legs, mode = flown_position_example(udp_ports, 11, with_velocity=True)
+    (n1, e1, d1, _), (n2, e2, d2, _) = legs
+    assert abs(n1) < 0.3 and abs(e1) < 0.3 and -11.6 < d1 < -10.3  # up 10 m, about 1 m over it
+    assert 50.3 < n2 < 51.6 and abs(e2) < 0.3 and d2 == pytest.approx(-10.0, abs=0.3)
+    assert mode == "HOLD"  # land, then offboard.stop(): the example ends hovering in Hold
+
+
 # --- MAVSDK and the ArduPilot personality -------------------------------------------------------------------------
 # ArduCopter streams nothing until asked (SRn_* = 0) and MAVSDK asks ArduPilot for no stream: its health flags come
 # from SYS_STATUS alone (MAVSDK telemetry_impl.cpp, process_sys_status). ArduPilot's documented fix for a companion
 # computer is to set the link's SRx_ parameters (ardupilot.org/dev/docs/mavlink-requesting-data.html); docs/sitl.md.
 COMPANION_STREAMS = {"SR0_EXT_STAT": 2.0, "SR0_POSITION": 5.0, "SR0_EXTRA1": 4.0}  # the API link is link 0 here
-
-
-def ardupilot_server(udp_ports: list[int], seed: int, params: dict[str, float]) -> tuple[VehicleServer, int]:
-    api_port, mavsdk_port = udp_ports[:2]
-    config = VehicleConfig(seed=seed, autopilot="ardupilot", params=params)
-    ports = UdpPorts(api_port=api_port, api_remote_port=mavsdk_port, gcs_remote_port=None)
-    return VehicleServer(config, ports, speed=SPEED), mavsdk_port
 
 
 async def fly_ardupilot_takeoff_goto_land(port: int, server: VehicleServer, north_m: float) -> list[str]:
@@ -268,7 +335,7 @@ async def fly_ardupilot_takeoff_goto_land(port: int, server: VehicleServer, nort
 
 
 def test_mavsdk_flies_ardupilot_take_off_goto_and_land_once_the_companion_link_streams(udp_ports):
-    server, mavsdk_port = ardupilot_server(udp_ports, seed=8, params=COMPANION_STREAMS)
+    server, mavsdk_port = vehicle_server(udp_ports, 8, "ardupilot", COMPANION_STREAMS)
     with server:
         start = server.vehicle.state
         modes = asyncio.run(asyncio.wait_for(fly_ardupilot_takeoff_goto_land(mavsdk_port, server, 60.0), 180))
@@ -292,7 +359,7 @@ async def health_when_home_arrives(port: int, server: VehicleServer):
 def test_mavsdk_on_a_default_ardupilot_knows_home_but_no_health_and_can_still_arm(udp_ports):
     # Home comes from MAVSDK's own HOME_POSITION request; nothing sends SYS_STATUS, so every health flag read from
     # it stays at MAVSDK's default, False, although the vehicle is armable (the arm succeeds).
-    server, mavsdk_port = ardupilot_server(udp_ports, seed=9, params={})
+    server, mavsdk_port = vehicle_server(udp_ports, 9, "ardupilot")
     with server:
         health = asyncio.run(asyncio.wait_for(health_when_home_arrives(mavsdk_port, server), 60))
         assert server.error is None and server.vehicle.handler_errors == 0

@@ -173,12 +173,34 @@ def test_position_only_setpoint_flies_to_the_point():
     assert (s.north_m, s.east_m, s.down_m) == pytest.approx((20.0, -5.0, -15.0), abs=0.3)
 
 
+POSITION_VELOCITY_YAW = 2496  # what MAVSDK's set_position_velocity_ned sends: acceleration and yaw rate ignored
+
+
+@pytest.mark.parametrize("feedforward_n, settles_n", [(0.0, (29.7, 30.3)), (1.0, (30.5, 31.6))])
+def test_position_with_velocity_feedforward_flies_the_position(feedforward_n, settles_n):
+    # PX4 takes both groups in MAV_FRAME_LOCAL_NED: the position controller's output plus the velocity as
+    # feed-forward (PositionControl), so a constant feed-forward settles where the P term cancels it: about
+    # v_ff / MPC_XY_P (0.95 /s) beyond the point, 1.05 m for 1 m/s.
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    for _ in range(250):
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, POSITION_VELOCITY_YAW, 30.0, 0.0, -10.0,
+                                                     feedforward_n, 0, 0, 0, 0, 0, math.pi / 2, 0)
+        fly(pilot, 0.1)
+    s = pilot.vehicle.state
+    assert settles_n[0] < s.north_m < settles_n[1] and abs(s.east_m) < 0.3 and s.down_m == pytest.approx(-10.0, abs=0.3)
+    assert math.hypot(*pilot.vehicle.ground_velocity[:2]) < 0.2
+    assert pilot.vehicle.state.yaw_rad == pytest.approx(math.pi / 2, abs=0.02)
+    assert not pilot.vehicle.autopilot.setpoints_ignored
+
+
 @pytest.mark.parametrize("frame, mask, reason", [
     (mavlink.MAV_FRAME_LOCAL_ENU, VELOCITY, "frame"),
     (mavlink.MAV_FRAME_GLOBAL, VELOCITY, "frame"),
     (LOCAL_NED, VELOCITY & ~0b111000000, "acceleration"),  # acceleration used
     (LOCAL_NED, VELOCITY | 0b1000, "partial"),  # vx ignored, vy/vz used
-    (LOCAL_NED, 0b110111111111, "exactly one"),  # nothing used
+    (LOCAL_NED, 0b110111111111, "neither position nor velocity"),  # nothing used
+    (BODY_NED, 0b110111000000, "only in MAV_FRAME_LOCAL_NED"),  # position + velocity in the body frame
 ])
 def test_unsupported_frames_and_masks_are_ignored_and_counted(frame, mask, reason):
     pilot = in_offboard(airborne())
