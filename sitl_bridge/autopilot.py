@@ -20,6 +20,7 @@ from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, Veloci
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_modes import FlightMode, base_mode
 from sitl_bridge.px4_offboard import OffboardSetpoints
+from sitl_bridge.px4_orbit import Orbit
 
 __all__ = ["ACCEPTED", "DENIED", "FAILED", "TEMPORARILY_REJECTED", "UNSUPPORTED", "Autopilot", "AutopilotEvent",
            "Setpoint", "as_int"]
@@ -40,7 +41,7 @@ REPOSITION_CHANGE_MODE = 1  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, the only flag
 
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
-                 FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
+                 FlightMode.ORBIT: "holding", FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
 
 
 class Autopilot(OffboardSetpoints, AutopilotBase):
@@ -58,6 +59,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         self.hold_target: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.hold_speed_mps: float | None = None  # a reposition's ground speed (None: MPC_XY_CRUISE)
         self.hold_yaw_rad: float | None = None  # a reposition's heading (None: hold the heading)
+        self.orbit: Orbit | None = None  # in ORBIT; None after a refused radius (PX4's failsafe task: hold)
         self.takeoff_alt_m = 0.0
         self.rtl_landing = False
         self.armed_at_s = 0.0
@@ -131,8 +133,11 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         self.mode = mode
         self.state_changed = True
         self.hold_speed_mps = self.hold_yaw_rad = None  # Navigator: entering Loiter resets the speed setpoint
-        if mode in (FlightMode.HOLD, FlightMode.POSCTL):
+        if mode in (FlightMode.HOLD, FlightMode.POSCTL, FlightMode.ORBIT):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
+        if mode is FlightMode.ORBIT:  # FlightTaskOrbit::activate: 1 m, 1 m/s, centred where the vehicle is
+            self.orbit = Orbit(state.north_m, state.east_m, state.down_m,
+                               yaw_behaviour=int(self.params["MC_ORBIT_YAW_MOD"]), initial_yaw_rad=state.yaw_rad)
         elif mode is FlightMode.TAKEOFF:
             self.hold_target = (state.north_m, state.east_m, -self.takeoff_alt_m)
         elif mode is FlightMode.LAND:
@@ -205,6 +210,8 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return self._zoom(as_int(p[0]), p[1], now)
         if command == mavlink.MAV_CMD_DO_REPOSITION:
             return self._reposition(p, frame, now, state)
+        if command == mavlink.MAV_CMD_DO_ORBIT:
+            return self._orbit(p, frame, now, state)
         return UNSUPPORTED
 
     def _takeoff(self, altitude_amsl: float, now: float, state: VehicleState) -> int:
@@ -231,26 +238,49 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         flags = as_int(p[1], 0)
         if flags != REPOSITION_CHANGE_MODE:
             return UNSUPPORTED
-        lat, lon = p[4], p[5]
-        if frame is not None:  # COMMAND_INT (mavlink_receiver.cpp, handle_message_command_int)
-            if lat == lon == NAN_AS_INT:
-                return DENIED
-            lat, lon = (math.nan, math.nan) if lat == lon == INT32_MAX else (lat / 1e7, lon / 1e7)
-        if abs(lat) > 90.0 or abs(lon) > 180.0:  # not a place (a NaN compares False: "keep the position")
-            return DENIED
-        if not self.gps_ok:
-            return TEMPORARILY_REJECTED
-        result = self.set_mode(FlightMode.HOLD, now, state, "DO_REPOSITION")
-        if not self.armed or state.on_ground:
+        result, place, take = self._place_command(FlightMode.HOLD, p, frame, now, state, "DO_REPOSITION")
+        if not take:
             return result
-        north, east = (self.ned_of(lat, lon) if math.isfinite(lat) and math.isfinite(lon)
-                       else (state.north_m, state.east_m))
+        north, east = place or (state.north_m, state.east_m)
         down = self.down_of(p[6]) if math.isfinite(p[6]) else state.down_m
         self.hold_target = (north, east, down)
         self.hold_speed_mps = p[0] if math.isfinite(p[0]) and p[0] > 0.0 else None
         self.hold_yaw_rad = p[3] if math.isfinite(p[3]) else None
         self._event(now, f"reposition to {north:.1f} m N, {east:.1f} m E, {-down:.1f} m up")
         return result
+
+    def _orbit(self, p: tuple[float, ...], frame: int | None, now: float, state: VehicleState) -> int:
+        """MAV_CMD_DO_ORBIT as PX4 splits it: Commander switches to Orbit (a position is needed), FlightTaskOrbit
+        takes the parameters while flying (sitl_bridge.px4_orbit); out of range radius: the failsafe task holds."""
+        result, place, take = self._place_command(FlightMode.ORBIT, p, frame, now, state, "DO_ORBIT")
+        if not take or self.orbit is None:
+            return result
+        down = self.down_of(p[6]) if math.isfinite(p[6]) else None
+        if not self.orbit.apply(p[0], p[1], p[2], place, down, state.yaw_rad, self.params["MC_ORBIT_RAD_MAX"]):
+            self._event(now, "Orbit radius limit exceeded", mavlink.MAV_SEVERITY_CRITICAL)
+            self.orbit = None
+            self.hold_target = (state.north_m, state.east_m, state.down_m)
+        return result
+
+    def _place_command(self, mode: FlightMode, p: tuple[float, ...], frame: int | None, now: float,
+                       state: VehicleState, reason: str) -> tuple[int, tuple[float, float] | None, bool]:
+        """Commander's half of DO_REPOSITION and DO_ORBIT: param5/param6 as a place, a GPS fix, the switch to
+        ``mode``. Returns (MAV_RESULT, the place in local NED or None when not given, whether the flight side
+        takes the command's parameters: only armed and in the air). In a COMMAND_INT (mavlink_receiver.cpp,
+        handle_message_command_int) x and y both INT32_MAX mean "not given", both 0x7FF80000 (a NaN sent as an
+        int) are DENIED; a latitude beyond 90 degrees or a longitude beyond 180 is DENIED too."""
+        lat, lon = p[4], p[5]
+        if frame is not None:
+            if lat == lon == NAN_AS_INT:
+                return DENIED, None, False
+            lat, lon = (math.nan, math.nan) if lat == lon == INT32_MAX else (lat / 1e7, lon / 1e7)
+        if abs(lat) > 90.0 or abs(lon) > 180.0:  # not a place (a NaN compares False: "keep the position")
+            return DENIED, None, False
+        if not self.gps_ok:
+            return TEMPORARILY_REJECTED, None, False
+        result = self.set_mode(mode, now, state, reason)
+        place = self.ned_of(lat, lon) if math.isfinite(lat) and math.isfinite(lon) else None
+        return result, place, result == ACCEPTED and self.armed and not state.on_ground
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:
         """SET_MODE: PX4 turns it into DO_SET_MODE internally and sends no ACK for the message."""
@@ -282,7 +312,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return self._landing_command(state, self.hold_target[0], self.hold_target[1])
         if mode is FlightMode.RTL:
             return self._rtl_command(state)
-        # HOLD and POSCTL (sticks centred): keep the captured position (or fly to a reposition's); on the ground
+        if mode is FlightMode.ORBIT and self.orbit is not None and not state.on_ground:
+            return self.orbit.command(state, self.airframe, self.params["MPC_XY_CRUISE"])
+        # HOLD, POSCTL and a refused orbit (sticks centred): keep the captured position (or fly to a reposition's); on the ground
         # stay down.
         north, east, down = self.hold_target
         if state.on_ground and down >= 0.0:

@@ -96,7 +96,7 @@ class FlightStatus:
     """The personality's own mode name (PX4: ``OFFBOARD``, ``HOLD``...; ArduPilot: ``GUIDED``, ``LOITER``...)."""
     phase: str
     """One of ``on_ground`` (disarmed, or armed and landed), ``taking_off``, ``guided`` (flying the
-    companion computer's setpoints: PX4 OFFBOARD, ArduPilot GUIDED), ``holding`` (PX4 HOLD/POSCTL, ArduPilot
+    companion computer's setpoints: PX4 OFFBOARD, ArduPilot GUIDED), ``holding`` (PX4 HOLD/POSCTL/ORBIT, ArduPilot
     LOITER/BRAKE), ``returning`` (RTL before its landing), ``landing`` (LAND, or RTL's final landing), ``manual``
     (ArduPilot STABILIZE: no pilot input, so throttle low)."""
     last_setpoint_s: float | None

@@ -55,6 +55,10 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_LAND_ALT1", REAL32, 10.0, 0.0, 122.0, "below this altitude landing starts to slow down (m)"),
     ParamSpec("MPC_LAND_ALT2", REAL32, 5.0, 0.0, 122.0, "below this altitude landing descends at MPC_LAND_SPEED (m)"),
     ParamSpec("MPC_YAWRAUTO_MAX", REAL32, 45.0, 5.0, 360.0, "yaw rate limit in auto modes and offboard (deg/s)"),
+    ParamSpec("MC_ORBIT_RAD_MAX", REAL32, 1000.0, 1.0, 10000.0, "largest radius DO_ORBIT accepts (m)"),
+    ParamSpec("MC_ORBIT_YAW_MOD", INT32, 0, 0, 4,
+              "orbit heading when DO_ORBIT leaves it unset: 0 facing the centre, 1 the initial heading, "
+              "2 uncontrolled, 3 along the tangent, 4 the pilot's"),
     # PX4 returns at 60 m; the simulated missions fly low over the sea, so 30 m keeps RTLs short.
     ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0, "RTL climbs to at least this altitude above home (m)"),
     ParamSpec("BAT_CRIT_THR", REAL32, 0.07, 0.05, 0.5, "battery fraction that triggers RTL"),

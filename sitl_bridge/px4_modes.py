@@ -19,6 +19,8 @@ SUB_AUTO_TAKEOFF = 2
 SUB_AUTO_LOITER = 3
 SUB_AUTO_RTL = 5
 SUB_AUTO_LAND = 6
+# PX4 POSCTL sub modes
+SUB_POSCTL_ORBIT = 1
 
 
 class FlightMode(enum.Enum):
@@ -30,6 +32,7 @@ class FlightMode(enum.Enum):
     RTL = (MAIN_AUTO, SUB_AUTO_RTL)
     LAND = (MAIN_AUTO, SUB_AUTO_LAND)
     POSCTL = (MAIN_POSCTL, 0)
+    ORBIT = (MAIN_POSCTL, SUB_POSCTL_ORBIT)  # entered by MAV_CMD_DO_ORBIT only
 
     @property
     def custom_mode(self) -> int:
@@ -44,14 +47,17 @@ class FlightMode(enum.Enum):
     @classmethod
     def from_custom_mode(cls, custom_mode: int) -> "FlightMode | None":
         """Decode HEARTBEAT.custom_mode; None for a PX4 mode that is not emulated."""
-        return cls.from_main_sub((custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF)
+        main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+        return cls((main, sub)) if (main, sub) == cls.ORBIT.value else cls.from_main_sub(main, sub)
 
     @classmethod
     def from_main_sub(cls, main: int, sub: int) -> "FlightMode | None":
-        """Decode a DO_SET_MODE request. POSCTL and OFFBOARD ignore the sub mode, as PX4 does."""
+        """Decode a DO_SET_MODE request. POSCTL and OFFBOARD ignore the sub mode, as PX4 does (so Orbit, which only
+        DO_ORBIT enters, cannot be asked for)."""
         for mode in cls:
             mode_main, mode_sub = mode.value
-            if mode_main == main and (mode_sub == sub or main in (MAIN_POSCTL, MAIN_OFFBOARD)):
+            if mode is not cls.ORBIT and mode_main == main and (mode_sub == sub
+                                                                 or main in (MAIN_POSCTL, MAIN_OFFBOARD)):
                 return mode
         return None
 
@@ -62,7 +68,7 @@ def base_mode(mode: FlightMode, armed: bool) -> int:
     flags |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
     if mode.is_auto:
         flags |= mavlink.MAV_MODE_FLAG_AUTO_ENABLED
-    if mode is FlightMode.POSCTL:
+    if mode in (FlightMode.POSCTL, FlightMode.ORBIT):
         flags |= mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
     if armed:
         flags |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED

@@ -20,7 +20,7 @@ import pytest
 
 mavsdk = pytest.importorskip("mavsdk.asyncio")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
+from mavsdk.asyncio.plugins.action import ActionAsync, OrbitYawBehavior  # noqa: E402
 from mavsdk.asyncio.plugins.offboard import (  # noqa: E402
     OffboardAsync, PositionNedYaw, VelocityBodyYawspeed, VelocityNedYaw)
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync  # noqa: E402
@@ -296,6 +296,52 @@ def test_mavsdk_offboard_position_velocity_ned_example_flies_the_positions_with_
     assert 50.3 < n2 < 51.6 and abs(e2) < 0.3 and d2 == pytest.approx(-10.0, abs=0.3)
     assert mode == "HOLD"  # land, then offboard.stop(): the example ends hovering in Hold
 
+
+
+ORBIT_CENTRE = (47.398036222362471, 8.5450146439425509)  # do_orbit.py's, about 55 m from PX4 SITL's home
+
+
+async def fly_orbit_example(port: int, server: VehicleServer) -> tuple[list[tuple[float, ...]], float]:
+    """MAVSDK-Python's do_orbit.py with sleeps in simulated seconds: wait for health, read the position, arm, take
+    off, wait 10 s, orbit its centre at 10 m radius and 2 m/s facing the centre, 10 m above the start, for 60 s,
+    then return to launch. Returns (distance from the centre, ground speed, altitude AMSL, heading error to the
+    centre in degrees) once a second over the orbit's last 20 s, and the altitude it asked for."""
+    vehicle = server.vehicle
+    centre = vehicle.frame.to_ned(*ORBIT_CENTRE, 0.0)[:2]
+    samples = []
+    async with autopilot_at(port) as system:
+        action, telemetry = ActionAsync(system), TelemetryAsync(system)
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                    20, "global position estimate")
+        position = await first(telemetry.subscribe_position(), lambda p: True, T, "a position")
+        orbit_height = position.absolute_altitude_m + 10
+        await bounded(action.arm())
+        await bounded(action.takeoff())
+        await sim_sleep(10.0)
+        await bounded(action.do_orbit(10, 2, OrbitYawBehavior.HOLD_FRONT_TO_CIRCLE_CENTER, *ORBIT_CENTRE,
+                                      orbit_height))
+        await sim_sleep(40.0)
+        for _ in range(20):
+            await sim_sleep(1.0)
+            s = vehicle.state
+            dn, de = s.north_m - centre[0], s.east_m - centre[1]
+            error = math.degrees(math.remainder(math.atan2(-de, -dn) - s.yaw_rad, math.tau))
+            samples.append((math.hypot(dn, de), math.hypot(s.vn_mps, s.ve_mps),
+                            vehicle.config.home.alt_m - s.down_m, error))
+        await bounded(action.return_to_launch())
+        await first(telemetry.subscribe_flight_mode(), lambda m: m == FlightMode.RETURN_TO_LAUNCH, T, "RTL")
+        return samples, orbit_height
+
+
+def test_mavsdk_do_orbit_example_circles_its_centre_facing_it(udp_ports):
+    # MAVSDK's do_orbit is PX4's Orbit mode (MAV_CMD_DO_ORBIT, sitl_bridge/px4_orbit.py, docs/sitl.md).
+    server, mavsdk_port = vehicle_server(udp_ports, 13)
+    with server:
+        samples, orbit_height = asyncio.run(asyncio.wait_for(fly_orbit_example(mavsdk_port, server), 120))
+        assert server.error is None and server.vehicle.handler_errors == 0
+    for distance, speed, altitude, heading_error in samples:
+        assert distance == pytest.approx(10.0, abs=0.5) and speed == pytest.approx(2.0, abs=0.2)
+        assert altitude == pytest.approx(orbit_height, abs=1.0) and abs(heading_error) < 5.0
 
 # --- MAVSDK and the ArduPilot personality -------------------------------------------------------------------------
 # ArduCopter streams nothing until asked (SRn_* = 0) and MAVSDK asks ArduPilot for no stream: its health flags come

@@ -265,3 +265,74 @@ def test_flight_status_is_the_neutral_view_of_px4_modes(pilot):
     assert autopilot.status.phase == "returning"
     assert pilot.command(mavlink.MAV_CMD_NAV_LAND) == ACCEPTED
     assert autopilot.status.phase == "landing"
+
+
+# ---------------------------------------------------------------- Orbit (MAV_CMD_DO_ORBIT, sitl_bridge/px4_orbit.py)
+ORBIT = mavlink.MAV_CMD_DO_ORBIT
+
+
+def circle_samples(pilot: LockstepPilot, centre: tuple[float, float], seconds: float) -> list[tuple[float, ...]]:
+    """(distance from the centre, bearing from it (rad), ground speed, altitude, heading error to the centre (deg))
+    every 0.5 s."""
+    vehicle, samples = pilot.vehicle, []
+    for _ in range(int(seconds / 0.5)):
+        pilot.vehicle.run(0.5)
+        s = vehicle.state
+        dn, de = s.north_m - centre[0], s.east_m - centre[1]
+        to_centre = math.degrees(math.remainder(math.atan2(-de, -dn) - s.yaw_rad, math.tau))
+        samples.append((math.hypot(dn, de), math.atan2(de, dn), math.hypot(s.vn_mps, s.ve_mps), -s.down_m,
+                        to_centre))
+    return samples
+
+
+def test_do_orbit_circles_the_point_at_its_speed_facing_the_centre_as_px4_does(pilot):
+    # MAVSDK's do_orbit: COMMAND_INT, radius (sign = direction, positive clockwise), speed, yaw behaviour 0 (face
+    # the centre), the centre's lat/lon * 1e7 and AMSL altitude (FlightTaskOrbit; docs/sitl.md).
+    vehicle, home_alt = airborne(pilot).vehicle, pilot.vehicle.config.home.alt_m
+    lat, lon, _ = vehicle.frame.to_geodetic(40.0, 0.0, 0.0)
+    assert command_int(pilot, ORBIT, (20.0, 4.0, 0, math.nan), scaled(lat), scaled(lon), home_alt + 15) == ACCEPTED
+    assert vehicle.autopilot.mode is FlightMode.ORBIT and vehicle.autopilot.status.phase == "holding"
+    heartbeat = pilot.wait_message("HEARTBEAT", 1.5)
+    assert (heartbeat.custom_mode >> 16 & 0xFF, heartbeat.custom_mode >> 24) == (3, 1)  # POSCTL main, ORBIT sub
+    assert heartbeat.base_mode & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    pilot.wait_for(lambda: vehicle.autopilot.orbit.on_circle(vehicle.state), 30.0, "on the circle")
+    pilot.vehicle.run(3.0)  # up to speed
+    samples = circle_samples(pilot, (40.0, 0.0), 10.0)
+    assert all(19.7 < d < 20.3 and speed == pytest.approx(4.0, abs=0.2) and alt == pytest.approx(15.0, abs=0.3)
+               and abs(yaw_error) < 3.0 for d, _, speed, alt, yaw_error in samples)
+    turned = sum(math.remainder(b - a, math.tau) for (_, a, *_), (_, b, *_) in zip(samples, samples[1:]))
+    assert math.degrees(turned) == pytest.approx(math.degrees(4.0 / 20.0 * 9.5), abs=8.0)  # clockwise: bearing grows
+
+
+def test_do_orbit_direction_speed_limit_radius_limit_and_the_ground(pilot):
+    vehicle = airborne(pilot).vehicle
+    # No centre or altitude (NaN): around where the vehicle is, at its altitude. Negative radius: counter-clockwise;
+    # 10 m/s on 5 m is more than PX4's 2 m/s² of centripetal acceleration allows: sqrt(2 * 5) m/s.
+    centre = (vehicle.state.north_m, vehicle.state.east_m)
+    assert pilot.command(ORBIT, -5.0, 10.0, 0, math.nan, math.nan, math.nan, math.nan) == ACCEPTED
+    altitude = -vehicle.state.down_m
+    pilot.wait_for(lambda: vehicle.autopilot.orbit.on_circle(vehicle.state), 30.0, "on the circle")
+    pilot.vehicle.run(3.0)
+    samples = circle_samples(pilot, centre, 4.0)
+    assert all(4.8 < d < 5.2 and speed == pytest.approx(math.sqrt(10.0), abs=0.2)
+               and alt == pytest.approx(altitude, abs=0.3) for d, _, speed, alt, _ in samples)
+    assert sum(math.remainder(b - a, math.tau) for (_, a, *_), (_, b, *_) in zip(samples, samples[1:])) < -1.0
+    # A radius beyond MC_ORBIT_RAD_MAX: "Orbit radius limit exceeded", the mode stays, the vehicle holds.
+    since = len(pilot.received)
+    assert pilot.command(ORBIT, 2000.0, 3.0, 0, math.nan, math.nan, math.nan, math.nan) == ACCEPTED
+    pilot.vehicle.run(3.0)
+    held = vehicle.state
+    pilot.vehicle.run(5.0)
+    assert "Orbit radius limit exceeded" in [m.text for m in pilot.received[since:] if m.get_type() == "STATUSTEXT"]
+    assert vehicle.autopilot.mode is FlightMode.ORBIT
+    assert math.hypot(vehicle.state.north_m - held.north_m, vehicle.state.east_m - held.east_m) < 0.5
+    # DO_SET_MODE cannot ask for Orbit (PX4 reads POSCTL's sub modes as POSCTL); on the ground Orbit changes the
+    # mode only.
+    assert pilot.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 3, 1) == ACCEPTED
+    assert vehicle.autopilot.mode is FlightMode.POSCTL
+    assert pilot.command(mavlink.MAV_CMD_NAV_LAND) == ACCEPTED
+    pilot.wait_for(lambda: not vehicle.autopilot.armed, 60.0, "landed and disarmed")
+    assert pilot.command(ARM, 1) == ACCEPTED
+    assert pilot.command(ORBIT, 10.0, 2.0, 0, math.nan, math.nan, math.nan, math.nan) == ACCEPTED
+    pilot.vehicle.run(3.0)
+    assert vehicle.autopilot.mode is FlightMode.ORBIT and vehicle.state.on_ground
