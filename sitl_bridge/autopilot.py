@@ -41,7 +41,8 @@ REPOSITION_CHANGE_MODE = 1  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, the only flag
 
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
-                 FlightMode.ORBIT: "holding", FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning", FlightMode.LAND: "landing"}
+                 FlightMode.ORBIT: "holding", FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning",
+                 FlightMode.LAND: "landing"}
 
 
 class Autopilot(OffboardSetpoints, AutopilotBase):
@@ -135,9 +136,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         self.hold_speed_mps = self.hold_yaw_rad = None  # Navigator: entering Loiter resets the speed setpoint
         if mode in (FlightMode.HOLD, FlightMode.POSCTL, FlightMode.ORBIT):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
-        if mode is FlightMode.ORBIT:  # FlightTaskOrbit::activate: 1 m, 1 m/s, centred where the vehicle is
-            self.orbit = Orbit(state.north_m, state.east_m, state.down_m,
-                               yaw_behaviour=int(self.params["MC_ORBIT_YAW_MOD"]), initial_yaw_rad=state.yaw_rad)
+            if mode is FlightMode.ORBIT:  # FlightTaskOrbit::activate: 1 m, 1 m/s, centred where the vehicle is
+                self.orbit = Orbit(state.north_m, state.east_m, state.down_m, initial_yaw_rad=state.yaw_rad,
+                                   yaw_behaviour=int(self.params["MC_ORBIT_YAW_MOD"]))
         elif mode is FlightMode.TAKEOFF:
             self.hold_target = (state.north_m, state.east_m, -self.takeoff_alt_m)
         elif mode is FlightMode.LAND:
@@ -314,8 +315,8 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return self._rtl_command(state)
         if mode is FlightMode.ORBIT and self.orbit is not None and not state.on_ground:
             return self.orbit.command(state, self.airframe, self.params["MPC_XY_CRUISE"])
-        # HOLD, POSCTL and a refused orbit (sticks centred): keep the captured position (or fly to a reposition's); on the ground
-        # stay down.
+        # HOLD, POSCTL (sticks centred) and an orbit whose radius was refused: keep the captured position (or fly
+        # to a reposition's); on the ground stay down.
         north, east, down = self.hold_target
         if state.on_ground and down >= 0.0:
             return HOVER

@@ -211,6 +211,7 @@ def print_ardupilot_streams(server: VehicleServer) -> None:
             print(f"  telemetry: SR{index}_* " + ", ".join(f"{group} {rate:g} Hz" for group, rate in rates.items()))
     companion = next((i for i, link in enumerate(server.links) if link.name == "api"), None)
     if companion is not None and companion < STREAM_LINKS and not streaming[companion].get("EXT_STAT"):
+        sr = f"SR{companion}"
         print(f"  MAVSDK on the companion link: it requests no streams from ArduPilot, so telemetry.health() never "
-              f"reports a global position; start with --param SR{companion}_EXT_STAT=2 --param SR{companion}_POSITION=5 "
-              f"--param SR{companion}_EXTRA1=4 (docs/sitl.md, \"MAVSDK and ArduPilot\")")
+              f"reports a global position; start with --param {sr}_EXT_STAT=2 --param {sr}_POSITION=5 "
+              f"--param {sr}_EXTRA1=4 (docs/sitl.md, \"MAVSDK and ArduPilot\")")

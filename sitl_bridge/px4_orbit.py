@@ -46,8 +46,8 @@ class Orbit:
 
     def apply(self, radius: float, speed: float, yaw_behaviour: float, centre: tuple[float, float] | None,
               down_m: float | None, yaw_rad: float, radius_max_m: float) -> bool:
-        """A DO_ORBIT's parameters (NaN: keep); False when the radius is out of range (nothing else changes
-        then either, but the centre and altitude)."""
+        """A DO_ORBIT's parameters (NaN: keep); False when the radius is out of range (then the radius and speed
+        stay as they were and the rest is taken, as in PX4)."""
         clockwise = self.velocity_mps > 0.0
         new_radius, new_speed = self.radius_m, abs(self.velocity_mps)
         if math.isfinite(radius):
