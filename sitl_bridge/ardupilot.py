@@ -44,10 +44,11 @@ LAND_WITH_PAUSE_S = 4.0  # a failsafe LAND waits this long before descending (se
 RTL_ALT_MIN_M = 2.0
 RTL_MIN_CONE_SLOPE = 0.5
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reported as ArduCopter V4.5.7, official release
-# What we implement of what ArduCopter claims (it also claims missions, FTP, attitude and global targets...).
+# What we implement of what ArduCopter claims (it also claims missions, FTP, attitude targets...).
 # No PARAM_ENCODE_BYTEWISE: ArduPilot parameters are floats.
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
 GUIDED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED, mavlink.MAV_FRAME_BODY_NED,
                  mavlink.MAV_FRAME_BODY_OFFSET_NED)
@@ -242,8 +243,8 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         """GCS_MAVLINK_Copter::handle_command_int_do_reposition (a COMMAND_INT; x/y degrees * 1e7, z metres in the
         command's frame): outside GUIDED it needs param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (else DENIED); a
         latitude/longitude out of range or both zero (Location::sanitize), or a frame other than global (AMSL)
-        or relative to home (ArduPilot also takes terrain frames; no terrain is simulated), DENIED; then GUIDED flies to the point at WPNAV_SPEED and holds (no yaw change);
-        FAILED if GUIDED cannot be entered. Armed on the ground the point is not taken (not checked against
+        or relative to home (ArduPilot also takes terrain frames; no terrain is simulated), DENIED; then GUIDED
+        flies to the point at WPNAV_SPEED and holds (no yaw change); FAILED if GUIDED cannot be entered. Armed on the ground the point is not taken (not checked against
         ArduPilot: a GUIDED takeoff replaces it there anyway)."""
         change_mode = as_int(p[1], 0) & 1
         if self.mode is not CopterMode.GUIDED and not change_mode:
@@ -302,10 +303,8 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
             reason = "non-finite position"
         elif not use_pos and not use_vel:
             reason = "acceleration setpoint" if use_acc else "nothing to fly"
-        if reason is not None:  # ModeGuided::init(true): the vehicle stops where it is
-            self.setpoints_ignored[reason] += 1
-            self.setpoint, self.hold_target = None, (state.north_m, state.east_m, state.down_m)
-            return False
+        if reason is not None:
+            return self._stop(reason, state)
         body = frame in BODY_FRAMES
         yaw_rad = None if mask & MASK_YAW or not math.isfinite(yaw) else yaw + (state.yaw_rad if body else 0.0)
         yaw_rate_rad_s = None if mask & MASK_YAW_RATE or not math.isfinite(yaw_rate) else yaw_rate
@@ -323,6 +322,31 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         self.setpoint = Setpoint(now, not use_pos, north, east, down, yaw_rad, yaw_rate_rad_s)
         self.taking_off, self.guided_timed_out = False, False  # a new target ends a takeoff
         return True
+
+    def handle_global_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
+                               position: tuple[int, int, float], velocity: tuple[float, float, float],
+                               yaw: float, yaw_rate: float) -> bool:
+        """GCS_MAVLINK_Copter::handle_message_set_position_target_global_int: in GUIDED only; a position needs a
+        latitude/longitude in range (check_latlng) and a GLOBAL, GLOBAL_RELATIVE_ALT or (with terrain data, none
+        here) GLOBAL_TERRAIN_ALT frame, else the vehicle stops; then as SET_POSITION_TARGET_LOCAL_NED."""
+        if self.mode is not CopterMode.GUIDED:
+            self.setpoints_ignored["not in GUIDED"] += 1
+            return False
+        local = (math.nan, math.nan, math.nan)
+        if not mask & MASK_POSITION:
+            lat_int, lon_int, _ = position
+            target = (self.global_target(frame, *position) if abs(lat_int) <= 90e7 and abs(lon_int) <= 180e7
+                      else "latitude/longitude out of range")
+            if isinstance(target, str):
+                return self._stop(target, state)
+            local = target
+        return self.handle_setpoint(now, state, mavlink.MAV_FRAME_LOCAL_NED, mask, local, velocity, yaw, yaw_rate)
+
+    def _stop(self, reason: str, state: VehicleState) -> bool:
+        """A refused GUIDED target: ModeGuided::init(true), the vehicle stops where it is; counted by reason."""
+        self.setpoints_ignored[reason] += 1
+        self.setpoint, self.hold_target = None, (state.north_m, state.east_m, state.down_m)
+        return False
 
     def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:
         """GUIDED velocities are limited like the position controller's: WPNAV_SPEED, _UP, _DN."""

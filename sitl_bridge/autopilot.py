@@ -33,6 +33,7 @@ FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
 
 INT32_MAX = 2**31 - 1  # COMMAND_INT x and y both INT32_MAX: no position given (mavlink_receiver.cpp)

@@ -38,6 +38,11 @@ MASK_FORCE = 512
 MASK_YAW = 1024
 MASK_YAW_RATE = 2048
 
+# SET_POSITION_TARGET_GLOBAL_INT frames by what their altitude is measured from
+AMSL_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
+ABOVE_HOME_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+TERRAIN_FRAMES = (mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT, mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)
+
 
 def as_int(value: float, default: int = -1) -> int:
     """A command parameter as an integer; NaN/inf (MAVSDK sends NaN for unused params) become ``default``."""
@@ -141,6 +146,19 @@ class AutopilotBase:
         """The simulator frame's down of an AMSL altitude (flat, as the vehicle's own altitude is)."""
         return self.frame.home.alt_m - alt_amsl_m
 
+    def global_target(self, frame: int, lat_int: int, lon_int: int, alt_m: float) -> tuple[float, float, float] | str:
+        """A SET_POSITION_TARGET_GLOBAL_INT position in the simulator's NED frame, or why it cannot be one: the
+        altitude is above mean sea level in the GLOBAL frames and above home in the GLOBAL_RELATIVE_ALT ones; the
+        terrain frames need terrain data, which is not simulated."""
+        if frame in TERRAIN_FRAMES:
+            return "terrain frame (no terrain data)"
+        if frame not in AMSL_FRAMES + ABOVE_HOME_FRAMES:
+            return f"frame {frame}"
+        if not math.isfinite(alt_m):
+            return "non-finite altitude"
+        north, east = self.ned_of(lat_int / 1e7, lon_int / 1e7)
+        return north, east, self.down_of(alt_m) if frame in AMSL_FRAMES else self.home_ned[2] - alt_m
+
     def _event(self, now: float, text: str, severity: int = mavlink.MAV_SEVERITY_INFO, broadcast: bool = True) -> None:
         self.events.append(AutopilotEvent(now, text, severity, broadcast))
 
@@ -174,6 +192,12 @@ class AutopilotBase:
     def handle_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
                         position: tuple[float, float, float], velocity: tuple[float, float, float],
                         yaw: float, yaw_rate: float) -> bool:
+        raise NotImplementedError
+
+    def handle_global_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
+                               position: tuple[int, int, float], velocity: tuple[float, float, float],
+                               yaw: float, yaw_rate: float) -> bool:
+        """SET_POSITION_TARGET_GLOBAL_INT; ``position`` is (lat_int, lon_int, alt) as on the wire."""
         raise NotImplementedError
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:

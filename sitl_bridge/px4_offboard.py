@@ -13,6 +13,9 @@ from sitl_bridge.autopilot_base import (
     MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW, MASK_YAW_RATE, Setpoint, body_to_ned)
 from sitl_bridge.multirotor import VehicleState
 
+PX4_GLOBAL_FRAMES = (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                     mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)
+
 
 class OffboardSetpoints:
     """PX4's intake of offboard setpoints: accepted ones become ``self.setpoint``, others are counted by reason."""
@@ -48,6 +51,22 @@ class OffboardSetpoints:
                                  self._clamp_yaw_rate(yaw_rate) if use_rate else None,
                                  tuple(velocity) if with_feedforward else None)
         return True
+
+    def handle_global_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
+                               position: tuple[int, int, float], velocity: tuple[float, float, float],
+                               yaw: float, yaw_rate: float) -> bool:
+        """SET_POSITION_TARGET_GLOBAL_INT as PX4's mavlink_receiver takes it: a position (x, y and z all used) in
+        MAV_FRAME_GLOBAL_INT (altitude above mean sea level) or GLOBAL_RELATIVE_ALT_INT (above home) is made local,
+        in GLOBAL_TERRAIN_ALT_INT it needs terrain data (none here), other frames are refused; the rest (masks,
+        velocity in NED, yaw) as for SET_POSITION_TARGET_LOCAL_NED."""
+        local = (math.nan, math.nan, math.nan)
+        if not mask & MASK_POSITION:
+            target = (self.global_target(frame, *position) if frame in PX4_GLOBAL_FRAMES else f"frame {frame}")
+            if isinstance(target, str):
+                self.setpoints_ignored[target] += 1
+                return False
+            local = target
+        return self.handle_setpoint(now, state, mavlink.MAV_FRAME_LOCAL_NED, mask, local, velocity, yaw, yaw_rate)
 
     @staticmethod
     def _setpoint_problem(frame: int, mask: int) -> str | None:

@@ -51,6 +51,7 @@ class MessageHandlers:
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_setpoint,
+            "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_setpoint,
             "PARAM_REQUEST_LIST": self._on_param_request_list,
             "PARAM_REQUEST_READ": self._on_param_request_read,
             "PARAM_SET": self._on_param_set,
@@ -133,6 +134,13 @@ class MessageHandlers:
             return
         self.autopilot.handle_setpoint(self.time_s, self.state, msg.coordinate_frame, msg.type_mask,
                                        (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
+
+    def _on_global_setpoint(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+        if not self._for_us(msg):
+            return
+        self.autopilot.handle_global_setpoint(self.time_s, self.state, msg.coordinate_frame, msg.type_mask,
+                                              (msg.lat_int, msg.lon_int, msg.alt), (msg.vx, msg.vy, msg.vz),
+                                              msg.yaw, msg.yaw_rate)
 
     def _on_set_mode(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         """The legacy SET_MODE message: PX4 sends no ACK, ArduPilot a COMMAND_ACK with command 11."""

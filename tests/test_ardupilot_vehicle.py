@@ -266,6 +266,44 @@ def test_setpoints_outside_guided_are_ignored_and_invalid_ones_stop_the_vehicle(
     assert pilot.vehicle.autopilot.setpoints_ignored["not in GUIDED"] == 1
 
 
+
+def global_setpoint(pilot: LockstepPilot, frame: int, mask: int, lat: float, lon: float, alt: float,
+                    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+    pilot.mav.set_position_target_global_int_send(0, 1, 1, frame, mask, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                                  alt, *velocity, 0, 0, 0, 0, 0)
+
+
+def test_global_position_targets_are_flown_in_guided_as_arducopter_takes_them():
+    # GCS_MAVLINK_Copter::handle_message_set_position_target_global_int (docs/sitl.md): GUIDED only; the GLOBAL
+    # frames' altitude is AMSL, the GLOBAL_RELATIVE_ALT ones' above home; a bad latitude or a terrain frame (no
+    # terrain data) stops the vehicle.
+    pilot = airborne()
+    vehicle, home_alt = pilot.vehicle, pilot.vehicle.config.home.alt_m
+    lat, lon, _ = vehicle.frame.to_geodetic(30.0, -20.0, 0.0)
+    global_setpoint(pilot, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, POSITION, lat, lon, 15.0)
+    fly(pilot, 25.0)
+    s = vehicle.state
+    assert (s.north_m, s.east_m, -s.down_m) == pytest.approx((30.0, -20.0, 15.0), abs=0.5)
+    global_setpoint(pilot, mavlink.MAV_FRAME_GLOBAL, POSITION, lat, lon, home_alt + 8.0)  # the float frame too
+    fly(pilot, 10.0)
+    assert -vehicle.state.down_m == pytest.approx(8.0, abs=0.4)
+    global_setpoint(pilot, mavlink.MAV_FRAME_GLOBAL_INT, VELOCITY, 0.0, 0.0, 0.0, (4.0, 0.0, 0.0))
+    fly(pilot, 3.0)
+    assert vehicle.ground_velocity[0] == pytest.approx(4.0, abs=0.3)
+    for frame, lat_deg, reason in ((mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT, lat, "terrain frame (no terrain data)"),
+                                   (mavlink.MAV_FRAME_GLOBAL_INT, 91.0, "latitude/longitude out of range"),
+                                   (mavlink.MAV_FRAME_LOCAL_NED, lat, "frame 1")):
+        global_setpoint(pilot, mavlink.MAV_FRAME_GLOBAL_INT, VELOCITY, 0.0, 0.0, 0.0, (4.0, 0.0, 0.0))
+        fly(pilot, 2.0)
+        global_setpoint(pilot, frame, POSITION, lat_deg, lon, 15.0)
+        fly(pilot, 4.0)
+        assert vehicle.autopilot.setpoints_ignored[reason] == 1, reason
+        assert math.hypot(*vehicle.ground_velocity[:2]) < 0.3, reason  # ModeGuided::init: stop
+    pilot.set_mode(CopterMode.LOITER)
+    global_setpoint(pilot, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, POSITION, lat, lon, 15.0)
+    pilot.vehicle.run(0.5)
+    assert vehicle.autopilot.setpoints_ignored["not in GUIDED"] == 1
+
 # ---------------------------------------------------------------- RTL, LAND and disarming
 def test_rtl_climbs_to_rtl_alt_returns_hovers_lands_and_disarms():
     pilot = airborne()
@@ -381,6 +419,7 @@ def test_parameters_are_floats_with_ardupilot_types():
     assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION) == ACCEPTED
     version = next(m for m in pilot.received[before:] if m.get_type() == "AUTOPILOT_VERSION")
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
     assert not version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     assert version.flight_sw_version >> 24 == 4
 

@@ -22,7 +22,7 @@ mavsdk = pytest.importorskip("mavsdk.asyncio")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, OrbitYawBehavior  # noqa: E402
 from mavsdk.asyncio.plugins.offboard import (  # noqa: E402
-    OffboardAsync, PositionNedYaw, VelocityBodyYawspeed, VelocityNedYaw)
+    OffboardAsync, PositionGlobalYaw, PositionNedYaw, VelocityBodyYawspeed, VelocityNedYaw)
 from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync  # noqa: E402
 
 from sitl_bridge.server import UdpPorts, VehicleServer  # noqa: E402
@@ -342,6 +342,37 @@ def test_mavsdk_do_orbit_example_circles_its_centre_facing_it(udp_ports):
     for distance, speed, altitude, heading_error in samples:
         assert distance == pytest.approx(10.0, abs=0.5) and speed == pytest.approx(2.0, abs=0.2)
         assert altitude == pytest.approx(orbit_height, abs=1.0) and abs(heading_error) < 5.0
+
+
+async def fly_global_offboard(port: int, server: VehicleServer, target: tuple[float, float]) -> str:
+    """Offboard with MAVSDK's set_position_global (SET_POSITION_TARGET_GLOBAL_INT, altitude above home): take off,
+    one setpoint 12 m above home facing east, start offboard, wait at the point; returns the mode then."""
+    async with autopilot_at(port) as system:
+        action, telemetry, offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                    20, "global position estimate")
+        await bounded(action.arm())
+        await bounded(action.takeoff())
+        await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 2.0, 20, "airborne")
+        await bounded(offboard.set_position_global(
+            PositionGlobalYaw(target[0], target[1], 12.0, 90.0, PositionGlobalYaw.AltitudeType.REL_HOME)))
+        await bounded(offboard.start())
+        await first(telemetry.subscribe_position(),
+                    lambda p: abs(p.latitude_deg - target[0]) < 1e-5 and abs(p.longitude_deg - target[1]) < 1e-5
+                    and abs(p.relative_altitude_m - 12.0) < 0.5, 60, "the global setpoint")
+        return server.vehicle.autopilot.status.mode_name
+
+
+def test_mavsdk_offboard_global_position_flies_to_the_point(udp_ports):
+    server, mavsdk_port = vehicle_server(udp_ports, 14)
+    with server:
+        target = server.vehicle.frame.to_geodetic(40.0, 25.0, 0.0)[:2]
+        mode = asyncio.run(asyncio.wait_for(fly_global_offboard(mavsdk_port, server, target), 90))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        state = server.vehicle.state
+        assert not server.vehicle.autopilot.setpoints_ignored
+    assert mode == "OFFBOARD" and math.hypot(state.north_m - 40.0, state.east_m - 25.0) < 1.5
+    assert math.degrees(state.yaw_rad) == pytest.approx(90.0, abs=3.0)
 
 # --- MAVSDK and the ArduPilot personality -------------------------------------------------------------------------
 # ArduCopter streams nothing until asked (SRn_* = 0) and MAVSDK asks ArduPilot for no stream: its health flags come

@@ -194,6 +194,38 @@ def test_position_with_velocity_feedforward_flies_the_position(feedforward_n, se
     assert not pilot.vehicle.autopilot.setpoints_ignored
 
 
+def test_global_position_setpoints_are_made_local_as_px4_does():
+    # mavlink_receiver.cpp, handle_message_set_position_target_global_int: GLOBAL_INT altitude AMSL,
+    # GLOBAL_RELATIVE_ALT_INT above home (MAVSDK's set_position_global); terrain needs terrain data; other frames
+    # refused; without a position the frame is not looked at.
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    vehicle, home_alt = pilot.vehicle, pilot.vehicle.config.home.alt_m
+    lat, lon, _ = vehicle.frame.to_geodetic(30.0, -20.0, 0.0)
+    x, y = int(round(lat * 1e7)), int(round(lon * 1e7))
+
+    def stream(frame: int, mask: int, alt: float, vn: float, seconds: float) -> None:
+        for _ in range(int(seconds * 10)):
+            pilot.mav.set_position_target_global_int_send(0, 1, 1, frame, mask, x, y, alt, vn, 0, 0, 0, 0, 0,
+                                                          math.pi / 2, 0)
+            fly(pilot, 0.1)
+
+    stream(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 2552, 15.0, 0.0, 20.0)  # position + yaw
+    s = vehicle.state
+    assert (s.north_m, s.east_m, -s.down_m) == pytest.approx((30.0, -20.0, 15.0), abs=0.3)
+    assert math.degrees(s.yaw_rad) == pytest.approx(90.0, abs=1.0)
+    stream(mavlink.MAV_FRAME_GLOBAL_INT, 2552, home_alt + 8.0, 0.0, 8.0)
+    assert -vehicle.state.down_m == pytest.approx(8.0, abs=0.3)
+    assert not vehicle.autopilot.setpoints_ignored
+    stream(mavlink.MAV_FRAME_GLOBAL, VELOCITY_YAW, 0.0, 3.0, 3.0)  # velocity only: any frame
+    assert vehicle.ground_velocity[0] == pytest.approx(3.0, abs=0.2)
+    for frame, reason in ((mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT, "terrain frame (no terrain data)"),
+                          (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, "frame 3")):
+        pilot.mav.set_position_target_global_int_send(0, 1, 1, frame, 2552, x, y, 15.0, 0, 0, 0, 0, 0, 0, 0, 0)
+        fly(pilot, 0.1)
+        assert vehicle.autopilot.setpoints_ignored[reason] == 1
+
+
 @pytest.mark.parametrize("frame, mask, reason", [
     (mavlink.MAV_FRAME_LOCAL_ENU, VELOCITY, "frame"),
     (mavlink.MAV_FRAME_GLOBAL, VELOCITY, "frame"),

@@ -65,6 +65,7 @@ def _fly(client: UdpClient, config: VehicleConfig) -> None:
     version = client.wait_message("AUTOPILOT_VERSION", 2.0, since=before)
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
     assert not version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT  # we do not claim missions
 
     # GPS, then arm and take off to 10 m (param7 is AMSL, as in PX4).
