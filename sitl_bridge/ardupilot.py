@@ -30,9 +30,9 @@ from missions.geodesy import LocalFrame
 from sitl_bridge.ardupilot_failsafes import CopterFailsafes
 from sitl_bridge.ardupilot_guidance import CopterGuidance
 from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
+from sitl_bridge.ardupilot_targets import GuidedTargets
 from sitl_bridge.autopilot_base import (
-    ACCEPTED, DENIED, FAILED, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY, MASK_YAW, MASK_YAW_RATE,
-    UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v, body_to_ned)
+    ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v)
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
@@ -50,15 +50,12 @@ CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOC
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
-GUIDED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED, mavlink.MAV_FRAME_BODY_NED,
-                 mavlink.MAV_FRAME_BODY_OFFSET_NED)
-BODY_FRAMES = (mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED)
 STOP = VelocityCommand()  # zero velocity, heading held
 PHASE_OF_MODE = {CopterMode.GUIDED: "guided", CopterMode.LOITER: "holding", CopterMode.BRAKE: "holding",
                  CopterMode.RTL: "returning", CopterMode.LAND: "landing", CopterMode.STABILIZE: "manual"}
 
 
-class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
+class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
     """Modes, arming and command handling of one simulated ArduCopter."""
 
     PARAMS_BYTEWISE = False
@@ -244,8 +241,9 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         command's frame): outside GUIDED it needs param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (else DENIED); a
         latitude/longitude out of range or both zero (Location::sanitize), or a frame other than global (AMSL)
         or relative to home (ArduPilot also takes terrain frames; no terrain is simulated), DENIED; then GUIDED
-        flies to the point at WPNAV_SPEED and holds (no yaw change); FAILED if GUIDED cannot be entered. Armed on the ground the point is not taken (not checked against
-        ArduPilot: a GUIDED takeoff replaces it there anyway)."""
+        flies to the point at WPNAV_SPEED and holds (no yaw change); FAILED if GUIDED cannot be entered. Armed on
+        the ground the point is not taken (not checked against ArduPilot: a GUIDED takeoff replaces it there
+        anyway)."""
         change_mode = as_int(p[1], 0) & 1
         if self.mode is not CopterMode.GUIDED and not change_mode:
             return DENIED
@@ -283,80 +281,6 @@ class ArduCopter(CopterFailsafes, CopterGuidance, AutopilotBase):
         return True
 
     # ----------------------------------------------------------------- GUIDED setpoints
-    def handle_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
-                        position: tuple[float, float, float], velocity: tuple[float, float, float],
-                        yaw: float, yaw_rate: float) -> bool:
-        """GCS_MAVLINK_Copter::handle_message_set_position_target_local_ned, in the simulator's frame."""
-        if self.mode is not CopterMode.GUIDED:
-            self.setpoints_ignored["not in GUIDED"] += 1
-            return False
-        use_pos, use_vel = not mask & MASK_POSITION, not mask & MASK_VELOCITY
-        use_acc = not mask & MASK_ACCELERATION
-        reason = None
-        if frame not in GUIDED_FRAMES:
-            reason = f"frame {frame}"
-        elif mask & MASK_FORCE and use_acc:
-            reason = "force setpoint"
-        elif use_vel and not all(math.isfinite(v) and abs(v) <= 1000.0 for v in velocity):
-            reason = "insane velocity"
-        elif use_pos and not all(math.isfinite(v) for v in position):
-            reason = "non-finite position"
-        elif not use_pos and not use_vel:
-            reason = "acceleration setpoint" if use_acc else "nothing to fly"
-        if reason is not None:
-            return self._stop(reason, state)
-        body = frame in BODY_FRAMES
-        yaw_rad = None if mask & MASK_YAW or not math.isfinite(yaw) else yaw + (state.yaw_rad if body else 0.0)
-        yaw_rate_rad_s = None if mask & MASK_YAW_RATE or not math.isfinite(yaw_rate) else yaw_rate
-        if use_pos:
-            north, east, down = position
-            if body:
-                north, east = body_to_ned(north, east, state.yaw_rad)
-            if frame != mavlink.MAV_FRAME_LOCAL_NED:  # offset and body frames are relative to the vehicle
-                north, east, down = north + state.north_m, east + state.east_m, down + state.down_m
-        else:
-            north, east, down = velocity
-            if body:
-                north, east = body_to_ned(north, east, state.yaw_rad)
-            north, east, down = self._clamp_velocity(north, east, down)
-        self.setpoint = Setpoint(now, not use_pos, north, east, down, yaw_rad, yaw_rate_rad_s)
-        self.taking_off, self.guided_timed_out = False, False  # a new target ends a takeoff
-        return True
-
-    def handle_global_setpoint(self, now: float, state: VehicleState, frame: int, mask: int,
-                               position: tuple[int, int, float], velocity: tuple[float, float, float],
-                               yaw: float, yaw_rate: float) -> bool:
-        """GCS_MAVLINK_Copter::handle_message_set_position_target_global_int: in GUIDED only; a position needs a
-        latitude/longitude in range (check_latlng) and a GLOBAL, GLOBAL_RELATIVE_ALT or (with terrain data, none
-        here) GLOBAL_TERRAIN_ALT frame, else the vehicle stops; then as SET_POSITION_TARGET_LOCAL_NED."""
-        if self.mode is not CopterMode.GUIDED:
-            self.setpoints_ignored["not in GUIDED"] += 1
-            return False
-        local = (math.nan, math.nan, math.nan)
-        if not mask & MASK_POSITION:
-            lat_int, lon_int, _ = position
-            target = (self.global_target(frame, *position) if abs(lat_int) <= 90e7 and abs(lon_int) <= 180e7
-                      else "latitude/longitude out of range")
-            if isinstance(target, str):
-                return self._stop(target, state)
-            local = target
-        return self.handle_setpoint(now, state, mavlink.MAV_FRAME_LOCAL_NED, mask, local, velocity, yaw, yaw_rate)
-
-    def _stop(self, reason: str, state: VehicleState) -> bool:
-        """A refused GUIDED target: ModeGuided::init(true), the vehicle stops where it is; counted by reason."""
-        self.setpoints_ignored[reason] += 1
-        self.setpoint, self.hold_target = None, (state.north_m, state.east_m, state.down_m)
-        return False
-
-    def _clamp_velocity(self, north: float, east: float, down: float) -> tuple[float, float, float]:
-        """GUIDED velocities are limited like the position controller's: WPNAV_SPEED, _UP, _DN."""
-        limit = self.params["WPNAV_SPEED"] / 100.0
-        speed = math.hypot(north, east)
-        if speed > limit:
-            north, east = north * limit / speed, east * limit / speed
-        down = min(max(down, -self.params["WPNAV_SPEED_UP"] / 100.0), self.params["WPNAV_SPEED_DN"] / 100.0)
-        return north, east, down
-
     # ----------------------------------------------------------------- the control loop
     def guidance(self, now: float, state: VehicleState) -> VelocityCommand:
         """Land detector, failsafes and auto-disarm, then this tick's velocity command for the dynamics."""

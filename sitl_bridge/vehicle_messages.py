@@ -61,8 +61,9 @@ class MessageHandlers:
             "HEARTBEAT": self._on_heartbeat,
             "SETUP_SIGNING": self._on_setup_signing,
         }
-        if self.is_ardupilot:  # PX4 does not implement REQUEST_DATA_STREAM
+        if self.is_ardupilot:  # PX4 implements neither REQUEST_DATA_STREAM nor guided-mode mission items
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
+            table["MISSION_ITEM_INT"] = table["MISSION_ITEM"] = self._on_mission_item
         return table
 
     def _for_us(self, msg: mavlink.MAVLink_message,
@@ -198,6 +199,19 @@ class MessageHandlers:
         if self._for_us(msg):  # no missions are stored; saying so stops ground stations waiting
             endpoint.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
                                                                 msg.mission_type))
+
+    def _on_mission_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+        """ArduPilot's guided-mode waypoints (MISSION_ITEM(_INT) with current 2 or 3), answered with MISSION_ACK."""
+        if not self._for_us(msg):
+            return
+        if msg.get_type() == "MISSION_ITEM":  # floats in degrees: ArduPilot converts them to the _INT form
+            lat_int, lon_int = int(round(msg.x * 1e7)), int(round(msg.y * 1e7))
+        else:
+            lat_int, lon_int = msg.x, msg.y
+        result = self.autopilot.handle_mission_item(msg.current, msg.command, msg.frame, lat_int, lon_int, msg.z,
+                                                    self.time_s, self.state)
+        endpoint.send(mavlink.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(), result,
+                                                          msg.mission_type))
 
     def _on_setup_signing(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         # No ACK in the protocol: the sender learns the outcome from whether our next frames verify.

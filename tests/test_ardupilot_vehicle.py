@@ -304,6 +304,37 @@ def test_global_position_targets_are_flown_in_guided_as_arducopter_takes_them():
     pilot.vehicle.run(0.5)
     assert vehicle.autopilot.setpoints_ignored["not in GUIDED"] == 1
 
+
+def guided_item(pilot: LockstepPilot, current: int, frame: int, lat: float, lon: float, alt: float,
+                command: int = mavlink.MAV_CMD_NAV_WAYPOINT, as_int: bool = True) -> int:
+    """A MISSION_ITEM(_INT) outside an upload; returns the MISSION_ACK's result."""
+    if as_int:
+        pilot.mav.mission_item_int_send(1, 1, 0, frame, command, current, 0, 0, 0, 0, 0,
+                                        int(round(lat * 1e7)), int(round(lon * 1e7)), alt)
+    else:  # DroneKit's simple_goto: MISSION_ITEM, degrees as floats
+        pilot.mav.mission_item_send(1, 1, 0, frame, command, current, 0, 0, 0, 0, 0, lat, lon, alt)
+    return pilot.wait_message("MISSION_ACK", 0.5).type
+
+
+def test_guided_mode_waypoints_as_arducopter_takes_them():
+    # GCS_MAVLINK::handle_mission_item, current == 2 → ModeAuto::do_guided (docs/sitl.md).
+    pilot = airborne()
+    vehicle = pilot.vehicle
+    lat, lon, _ = vehicle.frame.to_geodetic(-25.0, 30.0, 0.0)
+    relative = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+    assert guided_item(pilot, 2, relative, lat, lon, 14.0, as_int=False) == mavlink.MAV_MISSION_ACCEPTED
+    fly(pilot, 20.0)
+    s = vehicle.state
+    assert (s.north_m, s.east_m, -s.down_m) == pytest.approx((-25.0, 30.0, 14.0), abs=0.5)
+    assert guided_item(pilot, 3, relative, lat, lon, 30.0) == mavlink.MAV_MISSION_ACCEPTED  # Copter: nothing
+    fly(pilot, 5.0)
+    assert -vehicle.state.down_m == pytest.approx(14.0, abs=0.3)
+    assert guided_item(pilot, 2, relative, 91.0, lon, 14.0) == mavlink.MAV_MISSION_INVALID_PARAM5_X
+    assert guided_item(pilot, 2, mavlink.MAV_FRAME_LOCAL_NED, lat, lon, 14.0) == mavlink.MAV_MISSION_UNSUPPORTED_FRAME
+    assert guided_item(pilot, 0, relative, lat, lon, 14.0) == mavlink.MAV_MISSION_ERROR  # no upload under way
+    assert pilot.set_mode(CopterMode.LOITER) == ACCEPTED
+    assert guided_item(pilot, 2, relative, lat, lon, 20.0) == mavlink.MAV_MISSION_ERROR  # do_guided: GUIDED only
+
 # ---------------------------------------------------------------- RTL, LAND and disarming
 def test_rtl_climbs_to_rtl_alt_returns_hovers_lands_and_disarms():
     pilot = airborne()

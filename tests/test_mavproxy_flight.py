@@ -7,6 +7,7 @@ port like ArduPilot SITL's SERIAL0 (``--master=tcp:...``). Every wait is bounded
 """
 from __future__ import annotations
 
+import math
 import os
 import queue
 import subprocess
@@ -154,6 +155,18 @@ def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tm
             time.sleep(2.0 / (1.5 * SPEED))
             assert vehicle.state.north_m - start == pytest.approx(6.0, abs=1.5)
             assert abs(vehicle.state.vn_mps) < 0.3 and vehicle.autopilot.mode is CopterMode.GUIDED
+            # MAVProxy's "guided LAT LON ALT" (metres above home): DO_REPOSITION by default, and with
+            # guided_use_reposition off ArduPilot's older way, a MISSION_ITEM_INT with current = 2 (as DroneKit's
+            # simple_goto): both fly to the point in GUIDED.
+            for north, east, setting in ((30.0, 0.0, None), (30.0, 25.0, "set guided_use_reposition 0")):
+                if setting:
+                    mavproxy.send(setting)
+                lat, lon, _ = vehicle.frame.to_geodetic(north, east, 0.0)
+                mavproxy.send(f"guided {lat:.7f} {lon:.7f} 12")
+                mavproxy.expect("Guided (")
+                wait_until(lambda: math.hypot(vehicle.state.north_m - north, vehicle.state.east_m - east) < 1.0
+                           and abs(-vehicle.state.down_m - 12.0) < 0.5, 30, f"the guided point {north, east}")
+                assert vehicle.autopilot.mode is CopterMode.GUIDED
             return_home(mavproxy, vehicle, "mode RTL", "Mode RTL")
         finally:
             mavproxy.close()
