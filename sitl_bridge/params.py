@@ -54,7 +54,10 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_Z_V_AUTO_DN", REAL32, 1.5, 0.5, 4.0, "auto-mode descent speed above MPC_LAND_ALT1 (m/s)"),
     ParamSpec("MPC_LAND_ALT1", REAL32, 10.0, 0.0, 122.0, "below this altitude landing starts to slow down (m)"),
     ParamSpec("MPC_LAND_ALT2", REAL32, 5.0, 0.0, 122.0, "below this altitude landing descends at MPC_LAND_SPEED (m)"),
-    ParamSpec("MPC_YAWRAUTO_MAX", REAL32, 45.0, 5.0, 360.0, "yaw rate limit in auto modes and offboard (deg/s)"),
+    ParamSpec("MPC_YAWRAUTO_MAX", REAL32, 45.0, 5.0, 360.0,
+              "yaw rate limit of PX4's auto flight tasks (deg/s; held headings here turn at the airframe's rate)"),
+    ParamSpec("MC_YAWRATE_MAX", REAL32, 200.0, 0.0, 1800.0,
+              "the attitude controller's yaw rate limit (deg/s): the one an offboard yaw-rate setpoint meets"),
     ParamSpec("MC_ORBIT_RAD_MAX", REAL32, 1000.0, 1.0, 10000.0, "largest radius DO_ORBIT accepts (m)"),
     ParamSpec("MC_ORBIT_YAW_MOD", INT32, 0, 0, 4,
               "orbit heading when DO_ORBIT leaves it unset: 0 facing the centre, 1 the initial heading, "

@@ -92,5 +92,8 @@ class OffboardSetpoints:
         return north, east, down
 
     def _clamp_yaw_rate(self, rate: float) -> float:
-        limit = math.radians(self.params["MPC_YAWRAUTO_MAX"])
+        # Since PX4 1.13 offboard setpoints reach the controllers without a flight task, so FlightTaskAuto's
+        # MPC_YAWRAUTO_MAX does not apply; the attitude controller's MC_YAWRATE_MAX does (the airframe's own
+        # yaw rate limit, 60 deg/s by default, comes after it in the dynamics).
+        limit = math.radians(self.params["MC_YAWRATE_MAX"])
         return min(max(rate, -limit), limit)

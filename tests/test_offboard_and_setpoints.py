@@ -150,16 +150,31 @@ def test_body_frame_velocity_is_rotated_by_heading():
     assert pilot.vehicle.state.yaw_rad == pytest.approx(math.pi / 2, abs=0.02)  # ignored yaw holds heading
 
 
+def turned_deg(pilot: LockstepPilot, rate_deg_s: float, seconds: float) -> float:
+    """Degrees the vehicle turns while yaw-rate setpoints (velocity + yaw rate mask) stream at 20 Hz."""
+    start = pilot.vehicle.state.yaw_rad
+    for _ in range(int(round(seconds / 0.05))):
+        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, VELOCITY_YAW_RATE, 0, 0, 0, 0, 0, 0,
+                                                     0, 0, 0, 0, math.radians(rate_deg_s))
+        fly(pilot, 0.05)
+    return math.degrees(math.remainder(pilot.vehicle.state.yaw_rad - start, math.tau))
+
+
 def test_yaw_rate_mask_turns_at_the_commanded_rate():
     pilot = in_offboard(airborne())
     pilot.stream = None
-    start = pilot.vehicle.state.yaw_rad
-    for _ in range(40):
-        pilot.mav.set_position_target_local_ned_send(0, 1, 1, LOCAL_NED, VELOCITY_YAW_RATE, 0, 0, 0, 0, 0, 0,
-                                                     0, 0, 0, 0, math.radians(20))
-        fly(pilot, 0.05)
-    turned = math.degrees(math.remainder(pilot.vehicle.state.yaw_rad - start, math.tau))
-    assert turned == pytest.approx(40.0, abs=3.0)
+    assert turned_deg(pilot, 20.0, 2.0) == pytest.approx(40.0, abs=3.0)
+
+
+def test_a_fast_yaw_rate_meets_mc_yawrate_max_then_the_airframe_not_mpc_yawrauto_max():
+    # MAVSDK's offboard_velocity_body.py asks 60 deg/s: PX4 1.14 limits an offboard yawspeed by the attitude
+    # controller's MC_YAWRATE_MAX (200), not by the auto flight tasks' MPC_YAWRAUTO_MAX (45); the simulated
+    # airframe turns at most 60 deg/s.
+    pilot = in_offboard(airborne())
+    pilot.stream = None
+    assert turned_deg(pilot, 90.0, 1.0) == pytest.approx(60.0, abs=4.0)
+    pilot.set_param("MC_YAWRATE_MAX", 30.0)
+    assert turned_deg(pilot, 90.0, 1.0) == pytest.approx(30.0, abs=3.0)
 
 
 def test_position_only_setpoint_flies_to_the_point():
