@@ -59,7 +59,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         self.home_alt_m = frame.home.alt_m  # AMSL (moves with home); NAV_TAKEOFF's param7 is an AMSL altitude in PX4
         self.mode = FlightMode.HOLD
         self.hold_target: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self.hold_speed_mps: float | None = None  # a reposition's ground speed (None: MPC_XY_CRUISE)
+        # Navigator's cruising speed (a reposition's or DO_CHANGE_SPEED's ground speed; None: MPC_XY_CRUISE), used by
+        # HOLD and RTL; reset on every mode change
+        self.cruise_speed_mps: float | None = None
         self.hold_yaw_rad: float | None = None  # a reposition's heading (None: hold the heading)
         self.orbit: Orbit | None = None  # in ORBIT; None after a refused radius (PX4's failsafe task: hold)
         self.takeoff_alt_m = 0.0
@@ -134,7 +136,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return ACCEPTED
         self.mode = mode
         self.state_changed = True
-        self.hold_speed_mps = self.hold_yaw_rad = None  # Navigator: entering Loiter resets the speed setpoint
+        self.cruise_speed_mps = self.hold_yaw_rad = None  # Navigator resets the cruising speed on a mode change
         if mode in (FlightMode.HOLD, FlightMode.POSCTL, FlightMode.ORBIT):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
             if mode is FlightMode.ORBIT:  # FlightTaskOrbit::activate: 1 m, 1 m/s, centred where the vehicle is
@@ -214,6 +216,9 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return self._reposition(p, frame, now, state)
         if command == mavlink.MAV_CMD_DO_ORBIT:
             return self._orbit(p, frame, now, state)
+        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:  # Navigator: param2 > 0 sets the cruising speed, else resets
+            self.cruise_speed_mps = p[1] if math.isfinite(p[1]) and p[1] > 0.0 else None
+            return ACCEPTED
         return UNSUPPORTED
 
     def _takeoff(self, altitude_amsl: float, now: float, state: VehicleState) -> int:
@@ -246,7 +251,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         north, east = place or (state.north_m, state.east_m)
         down = self.down_of(p[6]) if math.isfinite(p[6]) else state.down_m
         self.hold_target = (north, east, down)
-        self.hold_speed_mps = p[0] if math.isfinite(p[0]) and p[0] > 0.0 else None
+        self.cruise_speed_mps = p[0] if math.isfinite(p[0]) and p[0] > 0.0 else None
         self.hold_yaw_rad = p[3] if math.isfinite(p[3]) else None
         self._event(now, f"reposition to {north:.1f} m N, {east:.1f} m E, {-down:.1f} m up")
         return result
@@ -322,7 +327,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         if state.on_ground and down >= 0.0:
             return HOVER
         command = velocity_toward(state, north, east, down, self.airframe,
-                                  speed_xy_mps=self.hold_speed_mps or self.params["MPC_XY_CRUISE"])
+                                  speed_xy_mps=self.cruise_speed_mps or self.params["MPC_XY_CRUISE"])
         return command if self.hold_yaw_rad is None else dataclasses.replace(command, yaw_rad=self.hold_yaw_rad)
 
     def _offboard_command(self, state: VehicleState) -> VelocityCommand:
@@ -354,7 +359,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
         return VelocityCommand(horizontal.north_mps, horizontal.east_mps, speed)
 
     def _rtl_command(self, state: VehicleState) -> VelocityCommand:
-        """Climb to RTL_RETURN_ALT if lower, fly home at MPC_XY_CRUISE, then land there."""
+        """Climb to RTL_RETURN_ALT if lower, fly home at the cruising speed (MPC_XY_CRUISE), then land there."""
         home_n, home_e, _ = self.home_ned
         if self.rtl_landing or state.on_ground:
             return self._landing_command(state, home_n, home_e)
@@ -366,7 +371,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             self.rtl_landing = True
             return self._landing_command(state, home_n, home_e)
         return velocity_toward(state, home_n, home_e, state.down_m, self.airframe,
-                               speed_xy_mps=self.params["MPC_XY_CRUISE"])
+                               speed_xy_mps=self.cruise_speed_mps or self.params["MPC_XY_CRUISE"])
 
     def _auto_disarm(self, now: float, state: VehicleState) -> None:
         if not state.on_ground:

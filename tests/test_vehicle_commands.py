@@ -336,3 +336,25 @@ def test_do_orbit_direction_speed_limit_radius_limit_and_the_ground(pilot):
     assert pilot.command(ORBIT, 10.0, 2.0, 0, math.nan, math.nan, math.nan, math.nan) == ACCEPTED
     pilot.vehicle.run(3.0)
     assert vehicle.autopilot.mode is FlightMode.ORBIT and vehicle.state.on_ground
+
+
+def test_do_change_speed_sets_the_cruising_speed_of_hold_and_rtl_until_the_mode_changes(pilot):
+    # MAVSDK's set_current_speed: DO_CHANGE_SPEED, param1 1 (ground speed), param2 the speed. PX4's Navigator takes
+    # param2 > 0 as the cruising speed (else resets it), ACCEPTED always, and resets it on a mode change.
+    vehicle = airborne(pilot).vehicle
+    lat, lon, _ = vehicle.frame.to_geodetic(80.0, 0.0, 0.0)
+    assert pilot.command(REPOSITION, -1, 1, 0, math.nan, lat, lon, math.nan) == ACCEPTED
+    assert pilot.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, 3.0, -1, 0) == ACCEPTED
+    pilot.vehicle.run(8.0)
+    assert vehicle.state.vn_mps == pytest.approx(3.0, abs=0.15)
+    assert pilot.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, 0.0, -1, 0) == ACCEPTED  # back to MPC_XY_CRUISE
+    pilot.vehicle.run(4.0)
+    assert vehicle.state.vn_mps == pytest.approx(vehicle.params["MPC_XY_CRUISE"], abs=0.15)
+    pilot.wait_for(lambda: vehicle.state.north_m > 78.0 and abs(vehicle.state.vn_mps) < 0.2, 30.0, "the point")
+    assert pilot.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == ACCEPTED
+    pilot.wait_for(lambda: -vehicle.state.down_m > vehicle.params["RTL_RETURN_ALT"] - 0.5, 30.0, "the RTL climb")
+    assert pilot.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, 2.0, -1, 0) == ACCEPTED
+    pilot.vehicle.run(10.0)
+    assert vehicle.state.vn_mps == pytest.approx(-2.0, abs=0.15)
+    assert pilot.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3) == ACCEPTED
+    assert vehicle.autopilot.cruise_speed_mps is None  # a mode change resets it
