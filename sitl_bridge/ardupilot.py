@@ -248,18 +248,14 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
         if self.mode is not CopterMode.GUIDED and not change_mode:
             return DENIED
         x, y, z = p[4], p[5], p[6]
-        if abs(x) > 90e7 or abs(y) > 180e7 or (x == 0 and y == 0) or not math.isfinite(z):
-            return DENIED
-        if frame in (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT):
-            down = self.down_of(z)
-        elif frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
-            down = self.home_ned[2] - z
-        else:
+        target = self.global_target(frame, x, y, z) if abs(x) <= 90e7 and abs(y) <= 180e7 and (x, y) != (0, 0) \
+            else "no place"
+        if isinstance(target, str):
             return DENIED
         if not self.set_mode(CopterMode.GUIDED, now, state, "DO_REPOSITION"):
             return FAILED
         if self.armed and not state.on_ground:
-            self.setpoint = Setpoint(now, False, *self.ned_of(x / 1e7, y / 1e7), down)
+            self.setpoint = Setpoint(now, False, *target)
         return ACCEPTED
 
     def handle_set_mode_message(self, base_mode: int, custom_mode: int, now: float, state: VehicleState) -> int | None:
@@ -280,7 +276,6 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
         self._event(now, f"takeoff to {alt_above_home_m:.1f} m above home", broadcast=False)
         return True
 
-    # ----------------------------------------------------------------- GUIDED setpoints
     # ----------------------------------------------------------------- the control loop
     def guidance(self, now: float, state: VehicleState) -> VelocityCommand:
         """Land detector, failsafes and auto-disarm, then this tick's velocity command for the dynamics."""

@@ -19,6 +19,7 @@ from sitl_bridge.multirotor import VehicleState
 GUIDED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED, mavlink.MAV_FRAME_BODY_NED,
                  mavlink.MAV_FRAME_BODY_OFFSET_NED)
 BODY_FRAMES = (mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED)
+LOCATION_ALT_MAX_M = 83000  # AP_Common/Location.h: the largest altitude a Location's alt field can hold (m)
 
 
 class GuidedTargets:
@@ -99,6 +100,10 @@ class GuidedTargets:
                 return mavlink.MAV_MISSION_INVALID_PARAM5_X
             if abs(lon_int) > 180e7:
                 return mavlink.MAV_MISSION_INVALID_PARAM6_Y
+            if not math.isfinite(alt_m) or abs(alt_m) >= LOCATION_ALT_MAX_M:
+                return mavlink.MAV_MISSION_INVALID_PARAM7
+            if frame == mavlink.MAV_FRAME_MISSION:  # taken as an altitude above mean sea level
+                frame = mavlink.MAV_FRAME_GLOBAL
             if frame not in AMSL_FRAMES + ABOVE_HOME_FRAMES + TERRAIN_FRAMES:
                 return mavlink.MAV_MISSION_UNSUPPORTED_FRAME
         if current == 3:

@@ -330,6 +330,11 @@ def test_guided_mode_waypoints_as_arducopter_takes_them():
     fly(pilot, 5.0)
     assert -vehicle.state.down_m == pytest.approx(14.0, abs=0.3)
     assert guided_item(pilot, 2, relative, 91.0, lon, 14.0) == mavlink.MAV_MISSION_INVALID_PARAM5_X
+    assert guided_item(pilot, 2, relative, lat, lon, math.nan) == mavlink.MAV_MISSION_INVALID_PARAM7
+    home_alt = vehicle.config.home.alt_m  # MAV_FRAME_MISSION: AP_Mission reads the altitude as AMSL
+    assert guided_item(pilot, 2, mavlink.MAV_FRAME_MISSION, lat, lon, home_alt + 9.0) == mavlink.MAV_MISSION_ACCEPTED
+    fly(pilot, 10.0)
+    assert -vehicle.state.down_m == pytest.approx(9.0, abs=0.3)
     assert guided_item(pilot, 2, mavlink.MAV_FRAME_LOCAL_NED, lat, lon, 14.0) == mavlink.MAV_MISSION_UNSUPPORTED_FRAME
     assert guided_item(pilot, 0, relative, lat, lon, 14.0) == mavlink.MAV_MISSION_ERROR  # no upload under way
     assert pilot.set_mode(CopterMode.LOITER) == ACCEPTED
