@@ -54,7 +54,10 @@ class AutopilotFlavour:
     failsafe_modes: frozenset[str]
     """Modes the autopilot's own link-loss failsafes switch to."""
     failsafe_text: re.Pattern
-    """STATUSTEXTs (lower case) that announce such a failsafe."""
+    """STATUSTEXTs (lower case) that announce such a (link-loss) failsafe."""
+    safety_text: re.Pattern
+    """STATUSTEXTs (lower case) that announce one of the autopilot's other failsafes (geofence, battery, estimator):
+    a mode change they explain is the autopilot keeping the drone safe, and the search must not resume over it."""
     takeoff_altitude_amsl: bool
     """Whether MAV_CMD_NAV_TAKEOFF's param7 is an AMSL altitude (PX4) rather than a height above home."""
     setpoint_timeout_s: float | None
@@ -78,13 +81,15 @@ class AutopilotFlavour:
 PX4 = AutopilotFlavour(
     name="PX4", companion_mode="OFFBOARD", takeoff_mode="TAKEOFF", arm_mode=None,
     failsafe_modes=frozenset({"POSCTL", "LOITER", "RTL", "LAND"}),
-    failsafe_text=re.compile(r"offboard.*(lost|loss)|no offboard signal|failsafe"),
+    failsafe_text=re.compile(r"offboard.*(lost|loss)|no offboard signal"),
+    safety_text=re.compile(r"geofence|battery|estimator|navigation failure"),
     takeoff_altitude_amsl=True, setpoint_timeout_s=None)
 
 ARDUPILOT_COPTER = AutopilotFlavour(
     name="ArduPilot Copter", companion_mode="GUIDED", takeoff_mode=None, arm_mode="GUIDED",
     failsafe_modes=frozenset({"RTL", "LAND", "SMART_RTL", "BRAKE", "LOITER"}),
-    failsafe_text=re.compile(r"gcs failsafe|failsafe"),
+    failsafe_text=re.compile(r"gcs failsafe(?! cleared)"),
+    safety_text=re.compile(r"fences? breached|battery|ekf"),
     takeoff_altitude_amsl=False, setpoint_timeout_s=3.0)
 
 

@@ -10,8 +10,10 @@ order (the first that applies wins):
 3. **disarmed** in flight: a reboot or a crash; there is nothing to resume or to bring home.
 4. **policy stalled**: no decision applied for ``policy_stall_rtl_s``.
 5. **low battery**: at or below ``low_battery_pct``.
-6. **the vehicle left the companion mode** (OFFBOARD / GUIDED): the vehicle's own link-loss failsafe, when
-   ``autonomy.link_loss`` has the evidence and resumptions are left (``resume``), else a pilot's decision (``end``).
+6. **the vehicle left the companion mode** (OFFBOARD / GUIDED): the autopilot's own safety failsafe (its geofence,
+   the battery: announced) ends the search; the vehicle's own link-loss failsafe resumes it when
+   ``autonomy.link_loss`` has the evidence and resumptions are left (``resume``); anything else is a pilot's
+   decision (``end``).
 
 The runner acts on the verdict (``MissionRunner._check_failsafes``): it records the event, ends the search with
 ``search_end`` (then returns home), or resumes.
@@ -65,6 +67,10 @@ def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavo
     if battery is not None and battery <= config.low_battery_pct:
         return Verdict("end", f"battery at {battery:g} %: RTL", "low battery")
     if mode != companion:
+        safety = link_loss.safety_failsafe(now)
+        if safety is not None:
+            return Verdict("end", f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe "
+                                  f"({safety!r})", f"vehicle switched to {mode}")
         evidence = link_loss.failsafe_evidence(now, mode)
         if evidence is not None and link_loss.may_resume():
             return Verdict("resume", "", mode=mode, evidence=evidence)

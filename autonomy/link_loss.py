@@ -10,10 +10,14 @@ GUIDED) and, with its GCS failsafe on, switches to RTL or LAND. Ending the searc
 * **silences**: every stretch of at least ``gap_s`` without a message from the vehicle (the runner's side of an
   outage, which is also when its setpoints were most likely lost);
 * **failsafe announcements**: STATUSTEXTs matching the autopilot's own link-loss wording (an uplink-only outage
-  shows no silence on our side, but the vehicle says what it did).
+  shows no silence on our side, but the vehicle says what it did);
+* **safety announcements**: STATUSTEXTs of the autopilot's other failsafes (its geofence, the battery, the
+  estimator). A mode change they explain is the autopilot keeping the drone safe: never resumed over, whatever
+  silence there was.
 
 A mode change out of the companion mode into one of the autopilot's failsafe modes counts as the vehicle's own
-failsafe when a silence or an announcement falls within ``evidence_window_s`` before the change was seen. Then the
+link-loss failsafe when a silence or an announcement falls within ``evidence_window_s`` before the change was seen,
+and no safety announcement does. Then the
 runner may resume (stream again, request OFFBOARD/GUIDED again, carry on from the same search state), at most
 ``max_resumptions`` times. Anything else (another mode, no evidence) is a pilot's decision: the search ends.
 
@@ -65,6 +69,7 @@ class LinkLossMonitor:
         self.config, self.flavour = config, flavour
         self.silences: list[Silence] = []
         self.announcements: list[tuple[float, str]] = []
+        self.safety_announcements: list[tuple[float, str]] = []
         self.resumptions = 0
 
     def observe(self, now_s: float, last_message_s: float | None, new_texts: list[tuple[float, str]]) -> None:
@@ -72,6 +77,8 @@ class LinkLossMonitor:
         for time_s, text in new_texts:
             if self.flavour.failsafe_text.search(text.lower()):
                 self.announcements.append((time_s, text))
+            if self.flavour.safety_text.search(text.lower()):
+                self.safety_announcements.append((time_s, text))
         if last_message_s is None:
             return
         ongoing = self.silences[-1] if self.silences and self.silences[-1].end_s is None else None
@@ -85,10 +92,16 @@ class LinkLossMonitor:
         """Whether the vehicle is silent now (for at least ``gap_s``)."""
         return bool(self.silences) and self.silences[-1].end_s is None
 
+    def safety_failsafe(self, now_s: float) -> str | None:
+        """The latest safety announcement within the evidence window before ``now_s`` (None: none)."""
+        since = now_s - self.config.evidence_window_s
+        texts = [text for time_s, text in self.safety_announcements if time_s >= since]
+        return texts[-1] if texts else None
+
     def failsafe_evidence(self, now_s: float, mode: str | None) -> str | None:
         """Why a switch to ``mode`` seen at ``now_s`` is the vehicle's own link-loss failsafe, in words; None when
-        nothing says so (then it is a pilot's mode change)."""
-        if mode not in self.flavour.failsafe_modes:
+        nothing says so (then it is a pilot's mode change) or a safety announcement explains it."""
+        if mode not in self.flavour.failsafe_modes or self.safety_failsafe(now_s) is not None:
             return None
         since = now_s - self.config.evidence_window_s
         texts = [text for time_s, text in self.announcements if time_s >= since]

@@ -60,6 +60,7 @@ class MavsdkLink:
         self._home: GeoPoint | None = None
         self._battery: float | None = None
         self._samples: list = []
+        self.params: dict[str, float] = {}  # read with request_params (MAVSDK's Param plugin decodes them)
         self._pending: set[Future] = set()
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="mavsdk", daemon=True)
@@ -77,6 +78,7 @@ class MavsdkLink:
     async def _connect(self, url: str, timeout_s: float):
         from mavsdk.asyncio.plugins.action import ActionAsync
         from mavsdk.asyncio.plugins.offboard import OffboardAsync
+        from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         await self._drone.add_any_connection(url)
@@ -84,6 +86,7 @@ class MavsdkLink:
         if system is None:
             raise LinkError(f"MAVSDK saw no autopilot on {url} within {timeout_s:g} s")
         self.action, self.offboard, self.telemetry = ActionAsync(system), OffboardAsync(system), TelemetryAsync(system)
+        self.param = ParamAsync(system)
         for watch in (self._watch_position, self._watch_mode, self._watch_armed, self._watch_home,
                       self._watch_battery):
             self._loop.create_task(watch())
@@ -179,6 +182,19 @@ class MavsdkLink:
 
     def request_message(self, message_id: int) -> None:
         """MAVSDK requests what its subscriptions need (the home position among them) itself."""
+
+    def request_params(self, names: tuple[str, ...]) -> None:
+        """Each of ``names`` not read yet, through MAVSDK's Param plugin (which knows each autopilot's encoding);
+        the answers land in :attr:`params`."""
+        for name in names:
+            if name not in self.params:
+                self._call(self._read_param(name))
+
+    async def _read_param(self, name: str) -> None:
+        try:  # the plugin asks for one type; a parameter of the other answers WRONG_TYPE
+            self.params[name] = float(await self.param.get_param_float(name))
+        except Exception:  # noqa: BLE001 - MAVSDK raises ParamError; anything else leaves the name unread too
+            self.params[name] = float(await self.param.get_param_int(name))
 
     def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
         """The runner's COMMAND_LONGs, as MAVSDK calls; the outcome arrives as a CommandAck."""

@@ -28,6 +28,7 @@ def mission_report(runner) -> dict:
         "failsafes": [e for e in runner.events if e["event"] == "failsafe"],
         "events": runner.events,
         "autopilot": runner.flavour.name,
+        "autopilot_fence": runner.autopilot_fence,
         "resumptions": runner.link_loss.resumptions,
         "estimator": runner.estimator.counters(),
         "vehicle_time": {"offset_s": runner.boot_time.offset_s, "timeline_changes": runner.boot_time.timeline_changes,

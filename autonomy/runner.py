@@ -7,7 +7,8 @@
 The autopilot is PX4 or ArduPilot Copter, told by the vehicle's HEARTBEAT (:mod:`autonomy.autopilots`): OFFBOARD is
 PX4's OFFBOARD or ArduPilot's GUIDED, and take-off, mode requests and failsafes follow the autopilot's own rules.
 Heights are above the vehicle's home (HOME_POSITION), and a mission whose launch point disagrees with that home is
-refused before arming (:mod:`autonomy.preflight`). A link outage during SEARCH holds the drone (zero velocity) and
+refused before arming (:mod:`autonomy.preflight`), as is one the autopilot's own geofence would cut short
+(:mod:`autonomy.autopilot_fence`). A link outage during SEARCH holds the drone (zero velocity) and
 pauses decisions until telemetry is back; a mode change that the vehicle's own link-loss failsafe made is followed by
 a resumption of the search, a pilot's mode change ends it (:mod:`autonomy.link_loss`, :mod:`autonomy.failsafes`).
 
@@ -28,6 +29,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from autonomy.autopilot_fence import fence_params, judge_autopilot_fence
 from autonomy.autopilots import PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
 from autonomy.estimator import PoseEstimator
@@ -85,6 +87,7 @@ class MissionRunner:
         self._zoom_percent: int | None = None
         self._last_decision_s = -math.inf
         self._height_target_m = mission.flight.altitude_m  # above the vehicle's home
+        self.autopilot_fence: dict | None = None  # what the preflight check found (autonomy.autopilot_fence)
         self._record("CONNECT", "start")
 
     # ------------------------------------------------------------------ bookkeeping
@@ -180,6 +183,7 @@ class MissionRunner:
         except UnsupportedAutopilot as exc:
             raise MissionAborted(str(exc)) from None
         self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour)
+        self.link.request_params(fence_params(self.flavour.name))  # read while the pose estimate converges
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
 
     def _ask_for_telemetry(self) -> None:
@@ -205,7 +209,27 @@ class MissionRunner:
         if not self.mission.home_altitude_known:
             self._event("warning", f"the mission gives no home altitude: the search altitude is held above the "
                                    f"vehicle's home ({describe_point(home)}), the search area assumed at its level")
+        self._check_autopilot_fence(home)
         self._record("ARM", "pose estimate converged, home known")
+
+    def _check_autopilot_fence(self, home) -> None:
+        """The autopilot's own geofence against the mission (autonomy.autopilot_fence): refused if it would stop
+        the search, a warning if there is none, recorded otherwise."""
+        names = fence_params(self.flavour.name)
+        try:
+            self.wait_until(lambda: all(name in self.link.params for name in names), self.config.param_timeout_s,
+                            "reading the autopilot's fence parameters",
+                            repeat=(STREAM_REQUEST_PERIOD_S, lambda: self.link.request_params(names)))
+        except MissionAborted as exc:
+            self.autopilot_fence = {"checked": False, "reason": str(exc)}
+            self._event("autopilot-fence", f"not checked ({exc})")
+            return
+        values = {name: self.link.params[name] for name in names}
+        self.autopilot_fence, refusal, note = judge_autopilot_fence(self.flavour.name, values, self.mission, home,
+                                                                    self.config.fence_margin_m)
+        if refusal is not None:
+            raise MissionAborted(f"refused before arming: {refusal}")
+        self._event("autopilot-fence", note)
 
     def _set_mode(self, mode: str) -> None:
         """MAV_CMD_DO_SET_MODE for ``mode`` (the autopilot's own numbers), done once the heartbeat shows it."""

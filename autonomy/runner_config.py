@@ -58,6 +58,9 @@ class RunnerConfig:
     farther, and the mission is refused before arming (GPS homes agree within a few metres)."""
     boot_time: BootTimeConfig = field(default_factory=BootTimeConfig)
     """How the vehicle's time_boot_ms is mapped onto the runner's clock (autonomy.vehicle_time)."""
+    param_timeout_s: float = 5.0
+    """Wait for the autopilot's fence parameters (asked for at CONNECT) once the pose has converged; unread, the
+    autopilot's fence is not checked (a warning)."""
     home_altitude_tolerance_m: float = 15.0
     """Largest difference between the mission's home altitude (when the file gives it) and the vehicle's home
     altitude, AMSL; more, and the mission is refused before arming (GPS altitude errs by a few metres)."""
@@ -72,4 +75,5 @@ class RunnerConfig:
                             ("low_battery_pct", 0.0, 100.0),
                             ("fence_margin_m", 0.0, 500.0), ("fence_lookahead_s", 0.0, 30.0),
                             ("altitude_gain", 0.01, 5.0), ("home_tolerance_m", 0.0, 10_000.0),
-                            ("home_altitude_tolerance_m", 0.0, 10_000.0)), integers=("command_retries",))
+                            ("home_altitude_tolerance_m", 0.0, 10_000.0), ("param_timeout_s", 0.1, 120.0)),
+                     integers=("command_retries",))

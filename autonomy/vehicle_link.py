@@ -8,7 +8,7 @@ connection instead. :class:`VehicleLink` then does what every companion computer
 * discovers the vehicle from the first autopilot HEARTBEAT and addresses everything to it;
 * keeps what the runner reads: the latest message of each type, the flight mode (PX4 custom modes, decoded by
   pymavlink), the time of the last vehicle message (telemetry loss), COMMAND_ACKs and STATUSTEXTs;
-* sends COMMAND_LONG, SET_MESSAGE_INTERVAL and velocity setpoints;
+* sends COMMAND_LONG, SET_MESSAGE_INTERVAL and velocity setpoints, and reads the parameters it is asked for;
 * hands every message, both directions, to an optional recorder (the tlog) with the run's clock;
 * with a signing key, signs everything it sends (timestamps from the run's clock), drops wrongly signed and
   replayed messages, and warns once when the vehicle's messages arrive unsigned (see missions.signing).
@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import struct
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
@@ -35,6 +36,10 @@ from missions.signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 1.0
 MAX_STATUS_TEXTS = 100  # the runner quotes the last two; a chatty or hostile vehicle must not grow memory
+STATUSTEXT_LEN = 50  # bytes of STATUSTEXT.text; longer texts come in chunks
+MAX_STATUSTEXT_CHARS = 1000  # a joined text is cut here
+INTEGER_PARAM_TYPES = (mavlink.MAV_PARAM_TYPE_INT8, mavlink.MAV_PARAM_TYPE_UINT8, mavlink.MAV_PARAM_TYPE_INT16,
+                       mavlink.MAV_PARAM_TYPE_UINT16, mavlink.MAV_PARAM_TYPE_INT32, mavlink.MAV_PARAM_TYPE_UINT32)
 _URL = re.compile(r"^(udpin|udpout|tcp):[^:]+:\d{1,5}$")
 _NOT_A_VEHICLE = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
 
@@ -107,6 +112,10 @@ class VehicleLink:
     """Where warnings go (the runner's log)."""
     signing: LinkSigning | None = field(default=None, init=False)
     _warned_unsigned: bool = field(default=False, init=False)
+    _statustext_parts: dict = field(default_factory=dict, init=False)  # the chunked STATUSTEXT being joined
+    params: dict[str, float] = field(default_factory=dict, init=False)
+    """The parameters read with :meth:`request_params`, by name, as numbers (PX4's bytewise integers decoded)."""
+    _params_wanted: set = field(default_factory=set, init=False)
     _vehicle_signs: bool = field(default=False, init=False)
     _next_heartbeat_s: float = -math.inf  # the first tick sends and anchors the 1 Hz schedule
 
@@ -188,12 +197,32 @@ class VehicleLink:
         self.last_vehicle_message_s = now
         if msg.get_type() == "COMMAND_ACK":
             self.acks.append(CommandAck(msg.command, msg.result, now))
+        elif msg.get_type() == "PARAM_VALUE" and msg.param_id in self._params_wanted:
+            self.params[msg.param_id] = self._param_number(msg)
         elif msg.get_type() == "STATUSTEXT":
-            self.status_texts.append(msg.text)
-            del self.status_texts[:-MAX_STATUS_TEXTS]
-            self.status_log.append((now, msg.text))
-            self.status_count += 1
+            text = self._join_statustext(msg)
+            if text is not None:
+                self.status_texts.append(text)
+                del self.status_texts[:-MAX_STATUS_TEXTS]
+                self.status_log.append((now, text))
+                self.status_count += 1
         return True
+
+    def _join_statustext(self, msg) -> str | None:
+        """The whole text of a STATUSTEXT, or None while a chunked one is incomplete. MAVLink: id 0 is a text of one
+        message; chunks of a longer one share a non-zero id, and the chunk shorter than the 50-byte field is the
+        last (PX4 and ArduPilot split texts so; an incomplete text is dropped when the next id starts)."""
+        text_id = getattr(msg, "id", 0) or 0
+        if not text_id:
+            return msg.text
+        parts = self._statustext_parts
+        if parts.get("id") != text_id:
+            parts = self._statustext_parts = {"id": text_id, "text": ""}
+        parts["text"] = (parts["text"] + msg.text)[:MAX_STATUSTEXT_CHARS]  # a hostile vehicle must not grow memory
+        if len(msg.text.encode()) >= STATUSTEXT_LEN:
+            return None
+        self._statustext_parts = {}
+        return parts["text"]
 
     def _forget_pymavlink_state(self, msg) -> None:
         """pymavlink's connection keeps the last message of every type per system and every parameter it hears;
@@ -276,6 +305,20 @@ class VehicleLink:
     def send_command(self, command: int, params: tuple[float, ...], confirmation: int = 0) -> None:
         padded = tuple(params) + (0.0,) * (7 - len(params))
         self._mav.command_long_send(*self._target(), command, confirmation, *padded)
+
+    def request_params(self, names: tuple[str, ...]) -> None:
+        """PARAM_REQUEST_READ for each of ``names`` not read yet; the answers land in :attr:`params`."""
+        self._params_wanted.update(names)
+        for name in names:
+            if name not in self.params:
+                self._mav.param_request_read_send(*self._target(), name.encode(), -1)
+
+    def _param_number(self, msg) -> float:
+        """PARAM_VALUE's number: PX4 puts an integer's bytes in the float field ("bytewise", announced in
+        AUTOPILOT_VERSION); ArduPilot sends every value as a float."""
+        if self.autopilot == mavlink.MAV_AUTOPILOT_PX4 and msg.param_type in INTEGER_PARAM_TYPES:
+            return float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        return float(msg.param_value)
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
         self.send_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, 1e6 / rate_hz))

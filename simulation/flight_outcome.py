@@ -39,9 +39,11 @@ from sitl_bridge.vehicle import SimulatedVehicle
 
 SAFE_PHASES = ("holding", "returning", "landing")
 """Phases (autopilot_base.FlightStatus.phase) an armed vehicle may end in safely."""
-FAILSAFE_TEXT = re.compile(r"^(Failsafe|GCS Failsafe(?! Cleared)|Battery Failsafe)")
+FAILSAFE_TEXT = re.compile(r"^(Failsafe|GCS Failsafe(?! Cleared)|Battery Failsafe|Geofence violation"
+                           r"|.* fences? breached$)")
 """The vehicle's own failsafe announcements: PX4-style "Failsafe: ...", ArduPilot's "GCS Failsafe", "Battery
-Failsafe" (not the "GCS Failsafe Cleared" that ends one)."""
+Failsafe" (not the "GCS Failsafe Cleared" that ends one), PX4's "Geofence violation: ..." and ArduPilot's
+"Circle fence breached"."""
 STOPPED_MPS = 0.5
 
 

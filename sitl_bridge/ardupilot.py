@@ -34,6 +34,7 @@ from sitl_bridge.ardupilot_targets import GuidedTargets
 from sitl_bridge.autopilot_base import (
     ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v)
 from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.fences import CopterFence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
@@ -55,7 +56,7 @@ PHASE_OF_MODE = {CopterMode.GUIDED: "guided", CopterMode.LOITER: "holding", Copt
                  CopterMode.RTL: "returning", CopterMode.LAND: "landing", CopterMode.STABILIZE: "manual"}
 
 
-class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
+class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, AutopilotBase):
     """Modes, arming and command handling of one simulated ArduCopter."""
 
     PARAMS_BYTEWISE = False
@@ -102,11 +103,16 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
         return (mavlink.MAV_BATTERY_CHARGE_STATE_OK, mavlink.MAV_BATTERY_CHARGE_STATE_LOW,
                 mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL)[self.battery_failsafe]
 
+    @property
+    def is_landing(self) -> bool:
+        """Mode::is_landing: LAND, or RTL in its final descent."""
+        return self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and self.rtl_state == "land")
+
     def landed_state(self, state: VehicleState) -> int:
         """GCS_MAVLINK_Copter::landed_state(): from the land detector, not the instant of touchdown."""
         if self.land_complete:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
-        if self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and self.rtl_state == "land"):
+        if self.is_landing:
             return mavlink.MAV_LANDED_STATE_LANDING
         if self.taking_off:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
@@ -118,6 +124,9 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
             return "Need Position Estimate"
         if self.gcs_failsafe:
             return "GCS failsafe on"
+        fence = self.fence_prearm_failure()
+        if fence:
+            return fence
         arm_volt = self.params["BATT_ARM_VOLT"]
         if arm_volt > 0 and battery_voltage_v(self.battery_fraction(state)) < arm_volt:
             return "Battery 1 below minimum arming voltage"
@@ -161,6 +170,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
             self.land_pause_until_s = now + LAND_WITH_PAUSE_S if "failsafe" in reason else -math.inf
         elif mode is CopterMode.RTL:
             self._rtl_start(state)
+        self._fence_recovery_start(now)
         self._event(now, f"mode {mode.name} ({reason})", broadcast=False)
         return True
 
@@ -280,6 +290,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
     def guidance(self, now: float, state: VehicleState) -> VelocityCommand:
         """Land detector, failsafes and auto-disarm, then this tick's velocity command for the dynamics."""
         self._update_land_detector(now, state)
+        self._check_fence(now, state, self.is_landing or self.land_complete or not self.armed)
         self._check_gcs_failsafe(now, state)
         if self.armed and not state.on_ground:
             self._check_battery(now, state)
@@ -316,7 +327,7 @@ class ArduCopter(CopterFailsafes, CopterGuidance, GuidedTargets, AutopilotBase):
         if not self.land_complete or self.taking_off:
             self._landed_armed_since_s = None
             return
-        if self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and self.rtl_state == "land"):
+        if self.is_landing:
             self._disarm(now, "landed")
             return
         if self._landed_armed_since_s is None:

@@ -71,7 +71,7 @@ class CopterFailsafes:
     def _failsafe(self, kind: str, mode: CopterMode | None, now: float, state: VehicleState, gcs: bool = False) -> None:
         """Copter::failsafe_gcs_on_event / handle_battery_failsafe + do_failsafe_action."""
         options = int(self.params["FS_OPTIONS"])
-        landing = self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and self.rtl_state == "land")
+        landing = self.is_landing
         if not self.armed:
             self._event(now, f"{kind} Failsafe", mavlink.MAV_SEVERITY_WARNING)
             return

@@ -3,6 +3,7 @@
 Sources (ArduPilot/ardupilot, read through the search tools; see docs/sitl.md): ArduCopter/Parameters.cpp
 (SYSID_MYGCS, RTL_*, FS_GCS_ENABLE, LAND_SPEED*, DISARM_DELAY, GUID_TIMEOUT, FS_GCS_TIMEOUT, FS_OPTIONS),
 libraries/AC_WPNav/AC_WPNav.cpp (WPNAV_SPEED 1000, WPNAV_SPEED_UP 250, WPNAV_SPEED_DN 150),
+libraries/AC_Fence/AC_Fence.cpp (FENCE_*),
 libraries/AP_BattMonitor/AP_BattMonitor_Params.cpp (BATT_LOW_VOLT 10.5 V on Copter, the others 0 = off) and
 libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp (SRn_* stream rates: 0 on Copter, so nothing streams until a
 ground station asks). Units are ArduPilot's (cm, cm/s, ms) because that is what a client reads and writes.
@@ -50,6 +51,17 @@ ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("WPNAV_SPEED_UP", REAL32, 250.0, 10.0, 1000.0, "climb speed limit, GUIDED takeoff speed (cm/s)"),
     ParamSpec("WPNAV_SPEED_DN", REAL32, 150.0, 10.0, 500.0, "descent speed limit (cm/s)"),
     ParamSpec("DISARM_DELAY", INT8, 10, 0, 127, "auto-disarm this long after landing outside LAND/RTL; 0 never (s)"),
+    ParamSpec("FENCE_ENABLE", INT8, 0, 0, 1, "the circle and altitude fences: 0 off, 1 on"),
+    ParamSpec("FENCE_TYPE", INT8, 7, 0, 15,
+              "fences bitmask: 1 max altitude, 2 circle around home, 4 polygons (none can be uploaded here), 8 min "
+              "altitude"),
+    ParamSpec("FENCE_ACTION", INT8, 1, 0, 5, "breach action: 0 report only, 1 RTL or land, 2 land, 4 brake or land",
+              allowed=(0, 1, 2, 4)),
+    ParamSpec("FENCE_ALT_MAX", REAL32, 100.0, 10.0, 1000.0, "fence ceiling above home (m)"),
+    ParamSpec("FENCE_ALT_MIN", REAL32, -10.0, -100.0, 100.0,
+              "fence floor above home (m), armed once the vehicle is FENCE_MARGIN above it, off while landing"),
+    ParamSpec("FENCE_RADIUS", REAL32, 300.0, 30.0, 10000.0, "circle fence radius around home (m)"),
+    ParamSpec("FENCE_MARGIN", REAL32, 2.0, 1.0, 10.0, "distance the autopilot keeps from a fence (m)"),
     ParamSpec("BATT_LOW_VOLT", REAL32, 10.5, 0.0, 100.0,
               "low-battery failsafe below this voltage for BATT_LOW_TIMER (V); 0 off"),
     ParamSpec("BATT_CRT_VOLT", REAL32, 0.0, 0.0, 100.0, "critical-battery failsafe voltage (V); 0 off"),

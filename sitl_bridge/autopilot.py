@@ -16,6 +16,7 @@ from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent,
     FlightStatus, Setpoint, as_int)
 from sitl_bridge.dynamics import velocity_toward
+from sitl_bridge.fences import Px4Geofence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_modes import FlightMode, base_mode
@@ -46,7 +47,7 @@ PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", Flig
                  FlightMode.LAND: "landing"}
 
 
-class Autopilot(OffboardSetpoints, AutopilotBase):
+class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
@@ -117,7 +118,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             return "no GPS fix"
         if state.battery_wh / self.airframe.battery_capacity_wh <= self.params["BAT_CRIT_THR"]:
             return "battery below BAT_CRIT_THR"
-        return None
+        return next(iter(self.geofence_violations(state)), None)
 
     # ----------------------------------------------------------------- modes and arming
     def set_mode(self, mode: FlightMode, now: float, state: VehicleState, reason: str,
@@ -393,6 +394,7 @@ class Autopilot(OffboardSetpoints, AutopilotBase):
             why = f"offboard setpoints lost for {now - last:.1f} s" if self.gps_ok else "no position estimate"
             self._event(now, f"Failsafe: {why}, switching to {action.name}", mavlink.MAV_SEVERITY_CRITICAL)
             self.set_mode(action, now, state, "offboard loss failsafe")
+        self._check_geofence(now, state)
         if state.on_ground:
             return
         fraction = state.battery_wh / self.airframe.battery_capacity_wh

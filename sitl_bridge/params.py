@@ -62,6 +62,11 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MC_ORBIT_YAW_MOD", INT32, 0, 0, 4,
               "orbit heading when DO_ORBIT leaves it unset: 0 facing the centre, 1 the initial heading, "
               "2 uncontrolled, 3 along the tangent, 4 the pilot's"),
+    ParamSpec("GF_ACTION", INT32, 2, 0, 5,
+              "geofence breach action: 0 none, 1 warning, 2 hold, 3 return (RTL), 5 land", allowed=(0, 1, 2, 3, 5)),
+    ParamSpec("GF_MAX_HOR_DIST", REAL32, 0.0, 0.0, 10000.0,
+              "geofence: largest horizontal distance from home (m); 0 off"),
+    ParamSpec("GF_MAX_VER_DIST", REAL32, 0.0, 0.0, 10000.0, "geofence: largest altitude above home (m); 0 off"),
     # PX4 returns at 60 m; the simulated missions fly low over the sea, so 30 m keeps RTLs short.
     ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0, "RTL climbs to at least this altitude above home (m)"),
     ParamSpec("BAT_CRIT_THR", REAL32, 0.07, 0.05, 0.5, "battery fraction that triggers RTL"),

@@ -34,6 +34,8 @@ from sitl_bridge.telemetry_profiles import link_rates_hz, resolve_profile
 from sitl_bridge.vehicle_config import VehicleConfig
 from sitl_bridge.vehicle_messages import MessageHandlers
 
+STATUSTEXT_LEN = 50  # bytes of STATUSTEXT.text
+
 
 def make_autopilot(config: VehicleConfig, params: ParameterStore, frame: LocalFrame) -> AutopilotBase:
     """A freshly booted autopilot of the configured personality, in the simulator's NED ``frame``."""
@@ -77,6 +79,7 @@ class SimulatedVehicle(MessageHandlers):
         self.links = list(links)
         self.endpoints = self._make_endpoints()
         self.on_event = on_event
+        self._statustext_id = 0  # the last id given to a chunked STATUSTEXT
         self.unhandled: dict[str, int] = {}
         self.handler_errors = 0
         self.signing_timestamp = signing_timestamp or simulated_timestamp(lambda: self.time_s)
@@ -158,6 +161,20 @@ class SimulatedVehicle(MessageHandlers):
             self._flush_events()
             self._send_telemetry()
 
+    def _send_statustext(self, severity: int, text: str) -> None:
+        """STATUSTEXT carries 50 bytes: a longer text goes in chunks that share a non-zero id, numbered by chunk_seq
+        (PX4's STATUSTEXT stream and ArduPilot's GCS::send_textv both split them so; MAVProxy joins them)."""
+        data = text.encode()
+        if len(data) <= STATUSTEXT_LEN:
+            self.broadcast(mavlink.MAVLink_statustext_message(severity, data, 0, 0))
+            return
+        self._statustext_id = self._statustext_id % 0xFFFF + 1
+        # a text filling its last chunk gets an empty one after it, so the last chunk is always the short one
+        # (ArduPilot's send_textv does so; PX4 stops at the full chunk)
+        for seq, start in enumerate(range(0, len(data) + 1, STATUSTEXT_LEN)):
+            chunk = data[start:start + STATUSTEXT_LEN]
+            self.broadcast(mavlink.MAVLink_statustext_message(severity, chunk, self._statustext_id, seq))
+
     def _flush_events(self) -> None:
         ap = self.autopilot
         if ap.state_changed:  # MAVSDK learns modes only from heartbeats: announce changes at once
@@ -165,7 +182,7 @@ class SimulatedVehicle(MessageHandlers):
             self.broadcast(telemetry.heartbeat(self))
         for event in ap.events:
             if event.broadcast:
-                self.broadcast(mavlink.MAVLink_statustext_message(event.severity, event.text.encode()[:50], 0, 0))
+                self._send_statustext(event.severity, event.text)
             if self.on_event:
                 self.on_event(event)
         ap.events.clear()

@@ -19,7 +19,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_runner import searched_to_its_own_end, small_mission
 
 import hrlsac_cli
-from autonomy.link_loss import LinkLossConfig
+from autonomy.autopilots import ARDUPILOT_COPTER, PX4
+from autonomy.link_loss import LinkLossConfig, LinkLossMonitor
 from autonomy.policy import Policy, load_policy
 from autonomy.runner import RunnerConfig
 from missions.mission_writer import save_mission
@@ -410,12 +411,19 @@ def test_when_only_the_telemetry_is_cut_the_runner_holds_then_carries_on(policy)
     assert outcome["outcome"] == "completed" and outcome["vehicle_end"] == "landed and disarmed"
 
 
-class PilotAtTheGroundStation:
-    """The vehicle's end of the link, plus a ground station (system 255) that switches the vehicle to POSCTL at
-    ``at_s``: a pilot taking over while the companion's link is fine. Its COMMAND_LONG is real MAVLink bytes."""
+def switch_to_posctl(gcs: mavlink.MAVLink):
+    return gcs.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                   3, 0, 0, 0, 0, 0)
 
-    def __init__(self, link, clock, at_s: float):
+
+class PilotAtTheGroundStation:
+    """The vehicle's end of the link, plus a ground station (system 255) that sends one message at ``at_s`` (by
+    default: switch the vehicle to POSCTL, a pilot taking over while the companion's link is fine). Real MAVLink
+    bytes."""
+
+    def __init__(self, link, clock, at_s: float, encode=switch_to_posctl):
         self.link, self.clock, self.at_s, self.sent, self.name = link, clock, at_s, False, link.name
+        self.encode = encode
         self.gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=mavlink.MAV_COMP_ID_MISSIONPLANNER)
 
     def send(self, data: bytes) -> None:
@@ -425,9 +433,7 @@ class PilotAtTheGroundStation:
         received = self.link.receive()
         if not self.sent and self.clock() >= self.at_s:
             self.sent = True
-            msg = self.gcs.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
-                                               mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 3, 0, 0, 0, 0, 0)
-            received.append(bytes(msg.pack(self.gcs)))
+            received.append(bytes(self.encode(self.gcs).pack(self.gcs)))
         return received
 
     def counts(self) -> dict:
@@ -490,3 +496,23 @@ def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, 
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["link_faults"] == "both ways outage=25:2" and report["complete"] is True
     assert report["outcome"]["outcome"] == "completed" and report["resumptions"] == 1
+
+
+@pytest.mark.parametrize("flavour, link_loss_text, safety_texts", [
+    (PX4, "Failsafe: offboard setpoints lost for 1.0 s, switching to POSCTL",
+     ["Geofence violation: exceeding maximum distance to Home", "Low battery level! Return advised",
+      "Failsafe: battery 6%, returning"]),
+    (ARDUPILOT_COPTER, "GCS Failsafe", ["Circle fence breached", "Battery Failsafe", "EKF Failsafe"])])
+def test_only_link_loss_is_resumed_from_never_the_autopilots_safety_failsafes(flavour, link_loss_text, safety_texts):
+    """Any STATUSTEXT with "failsafe" in it used to count as link-loss evidence: a geofence or battery RTL would
+    have been flown back into OFFBOARD / GUIDED. A safety text in the window vetoes even a silence's evidence."""
+    mode = "RTL"
+    announced = LinkLossMonitor(LinkLossConfig(), flavour)
+    announced.observe(10.0, 10.0, [(10.0, link_loss_text), (11.0, "GCS Failsafe Cleared")])
+    assert announced.failsafe_evidence(12.0, mode) == f"the vehicle announced it: {link_loss_text!r}"
+    for text in safety_texts:
+        silent = LinkLossMonitor(LinkLossConfig(), flavour)
+        silent.observe(10.0, 8.0, [])  # a 2 s silence: link-loss evidence on its own...
+        silent.observe(10.5, 10.5, [(10.5, text)])
+        assert silent.safety_failsafe(12.0) == text and silent.failsafe_evidence(12.0, mode) is None
+        assert silent.failsafe_evidence(12.0 + LinkLossConfig().evidence_window_s, mode) is None  # both expired

@@ -104,25 +104,54 @@ def test_mavproxy_flies_the_px4_personality(udp_ports, tmp_path):
         vehicle = server.vehicle
         mavproxy = MavProxy(f"udpin:127.0.0.1:{gcs_remote}", tmp_path)
         try:
-            mavproxy.expect("Detected vehicle 1:1")
-            mavproxy.expect(f"Received {len(vehicle.params)} parameters", 30)
-            mavproxy.send("param set MIS_TAKEOFF_ALT 8")
-            wait_until(lambda: vehicle.params["MIS_TAKEOFF_ALT"] == 8.0, 10, "MIS_TAKEOFF_ALT")
-            mavproxy.send("arm throttle")
-            mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
-            mavproxy.send("takeoff 8")  # param7 AMSL for PX4: below home, so PX4 takes off to MIS_TAKEOFF_ALT
-            mavproxy.expect("NAV_TAKEOFF: ACCEPTED")
-            wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD and -vehicle.state.down_m > 7.5, 20,
-                       "takeoff to 8 m")
-            mavproxy.send("velocity 3 0 0")  # one setpoint (BODY_NED), then OFFBOARD at once: PX4 accepts it
-            mavproxy.send("long DO_SET_MODE 1 6 0")
-            mavproxy.expect("DO_SET_MODE: ACCEPTED")
-            start = vehicle.state.north_m
-            for _ in range(15):  # keep the setpoints coming (COM_OF_LOSS_T is 1 s of vehicle time)
-                mavproxy.send("velocity 3 0 0")
-                time.sleep(0.15)
+            start = px4_offboard_north(mavproxy, vehicle, setpoints=15)
             assert vehicle.autopilot.mode is FlightMode.OFFBOARD
             assert vehicle.state.north_m - start > 3.0
+            return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
+        finally:
+            mavproxy.close()
+        assert server.error is None and vehicle.handler_errors == 0
+
+
+def px4_offboard_north(mavproxy: MavProxy, vehicle, setpoints: int, params: tuple[str, ...] = ()) -> float:
+    """Parameters set with ``param set``, take-off to 8 m, OFFBOARD with MAVProxy's ``velocity`` at 3 m/s north for
+    ``setpoints`` setpoints 0.15 s apart; returns where the vehicle was when OFFBOARD was accepted."""
+    mavproxy.expect("Detected vehicle 1:1")
+    mavproxy.expect(f"Received {len(vehicle.params)} parameters", 30)
+    for line in ("MIS_TAKEOFF_ALT 8", *params):
+        name, value = line.split()
+        mavproxy.send(f"param set {name} {value}")
+        wait_until(lambda: vehicle.params[name] == float(value), 10, name)
+    mavproxy.send("arm throttle")
+    mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+    mavproxy.send("takeoff 8")  # param7 AMSL for PX4: below home, so PX4 takes off to MIS_TAKEOFF_ALT
+    mavproxy.expect("NAV_TAKEOFF: ACCEPTED")
+    wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD and -vehicle.state.down_m > 7.5, 20,
+               "takeoff to 8 m")
+    mavproxy.send("velocity 3 0 0")  # one setpoint (BODY_NED), then OFFBOARD at once: PX4 accepts it
+    mavproxy.send("long DO_SET_MODE 1 6 0")
+    mavproxy.expect("DO_SET_MODE: ACCEPTED")
+    start = vehicle.state.north_m
+    for _ in range(setpoints):  # keep the setpoints coming (COM_OF_LOSS_T is 1 s of vehicle time)
+        mavproxy.send("velocity 3 0 0")
+        time.sleep(0.15)
+    return start
+
+
+def test_mavproxy_sees_px4s_geofence_hold_and_joins_its_chunked_text(udp_ports, tmp_path):
+    """GF_MAX_HOR_DIST set from MAVProxy; flown past it, the vehicle holds and says why in a 54-character text,
+    which STATUSTEXT carries in two chunks: MAVProxy prints it whole."""
+    api_port, api_remote, gcs_port, gcs_remote = udp_ports
+    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_port=gcs_port, gcs_remote_port=gcs_remote)
+    with VehicleServer(VehicleConfig(seed=3), ports, speed=SPEED) as server:
+        vehicle = server.vehicle
+        mavproxy = MavProxy(f"udpin:127.0.0.1:{gcs_remote}", tmp_path)
+        try:
+            px4_offboard_north(mavproxy, vehicle, setpoints=40, params=("GF_MAX_HOR_DIST 12",))
+            mavproxy.expect("Geofence violation: exceeding maximum distance to Home")
+            wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD, 5, "HOLD")
+            mavproxy.expect("Mode LOITER")  # PX4's HOLD, as pymavlink names it
+            assert 12.0 <= math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 16.0
             return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
         finally:
             mavproxy.close()

@@ -14,10 +14,12 @@ import math
 import pytest
 import torch
 from pymavlink.dialects.v20 import common as mavlink
+from test_link_faults import PilotAtTheGroundStation
 from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
 
 from autonomy.policy import Policy, load_policy
 from missions.goals import TRACK_OBJECT
+from simulation import mission_replay as replay_module
 from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.faults import parse_link_faults
 from sitl_bridge.vehicle import VehicleConfig
@@ -97,6 +99,41 @@ def test_ardupilots_gcs_failsafe_rtl_is_resumed_from(policy):
     assert resume.startswith("the vehicle's link-loss failsafe switched it to RTL (the link was lost for 10.1 s")
     assert states(report)[5:8] == ["SEARCH", "OFFBOARD", "SEARCH"] and searched_to_its_own_end(report)
     assert report["outcome"]["outcome"] == "completed"
+
+
+# ---------------------------------------------------------------------------------------- the autopilot's fence
+def outbound(policy: Policy) -> Policy:
+    """The artifact made to head north at full speed (TrackObject at every decision), whatever it learned."""
+    return dataclasses.replace(
+        with_actions(policy, lambda obs: torch.tensor([[1.0, 0.0, 1.0, 0.0]]).expand(obs.shape[0], 4).contiguous()),
+        _select_goal=lambda meta_obs: torch.full((meta_obs.shape[0],), TRACK_OBJECT, dtype=torch.int64))
+
+
+@pytest.mark.parametrize("autopilot, fence, mode, text", [
+    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "LOITER", "Geofence violation: exceeding maximum distance to Home"),
+    ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "RTL", "Circle fence breached")])
+def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(policy, monkeypatch, autopilot, fence,
+                                                                               mode, text):
+    """The ground station tightens the autopilot's fence to 150 m during the search (the runner's preflight would
+    refuse such a fence), inside the mission's area, so the runner's guard does not act first. The runner must not
+    take the vehicle back into OFFBOARD / GUIDED as it does after a link-loss failsafe (it did: any STATUSTEXT with
+    "failsafe" in it counted as link-loss evidence), and it brings the vehicle home."""
+    name = list(fence)[-1]
+    params = {**fence, name: 0.0} if autopilot == "px4" else {**fence, name: 1000.0}  # wide at the preflight
+    kind = mavlink.MAV_PARAM_TYPE_REAL32
+    tighten = (lambda gcs: gcs.param_set_encode(1, 1, name.encode(), fence[name], kind))
+    monkeypatch.setattr(replay_module, "apply_faults",
+                        lambda links, faults, clock, seed: [PilotAtTheGroundStation(links[0], clock, 30.0, tighten)])
+    report = fly(outbound(policy), autopilot, params=params)
+    assert report["link_packets"] == {"pilot_commands": 1}
+    assert events(report, "resume") == [] and report["resumptions"] == 0
+    (failsafe,) = events(report, "failsafe")
+    companion = "OFFBOARD" if autopilot == "px4" else "GUIDED"
+    assert failsafe.startswith(f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe (")
+    assert report["search_end"] == f"vehicle switched to {mode}" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
+    assert [f["reason"] for f in report["outcome"]["vehicle_failsafes"]] == [text]
+    assert report["outcome"]["outcome"] == "safe" and report["outcome"]["vehicle_end"] == "landed and disarmed"
+    assert report["outcome"]["max_fence_excursion_m"] == 0.0
 
 
 # ---------------------------------------------------------------------------------------- one time base

@@ -1,0 +1,87 @@
+"""The runner's preflight check of the autopilot's own geofence (autonomy/autopilot_fence.py): the parameters read
+from the simulated PX4 and ArduPilot over the in-memory link, the judgement, the refusal and the warning."""
+from __future__ import annotations
+
+import pytest
+from test_runner_autopilots import events, fly, outbound, policy, states  # noqa: F401 - policy is a fixture
+from test_runner import small_mission
+
+from autonomy.autopilot_fence import fence_conflicts, judge_autopilot_fence, read_fence
+from autonomy.vehicle_link import VehicleLink
+
+HOME = small_mission().launch_point
+PX4_FENCE = {"GF_ACTION": 2, "GF_MAX_HOR_DIST": 0.0, "GF_MAX_VER_DIST": 0.0}
+COPTER_FENCE = {"FENCE_ENABLE": 1, "FENCE_TYPE": 7, "FENCE_ACTION": 1, "FENCE_RADIUS": 300.0,
+                "FENCE_ALT_MAX": 100.0, "FENCE_ALT_MIN": -10.0}
+
+
+def test_what_each_autopilots_parameters_mean():
+    px4 = read_fence("PX4", {**PX4_FENCE, "GF_MAX_HOR_DIST": 800.0})
+    assert (px4.radius_m, px4.ceiling_m, px4.floor_m, px4.acts) == (800.0, None, None, True)
+    assert px4.describe() == "GF_MAX_HOR_DIST 800 m, on a breach: Hold"
+    assert not read_fence("PX4", {**PX4_FENCE, "GF_ACTION": 1}).acts  # a warning changes nothing
+    copter = read_fence("ArduPilot Copter", {**COPTER_FENCE, "FENCE_TYPE": 15})
+    assert (copter.radius_m, copter.ceiling_m, copter.floor_m, copter.acts) == (300.0, 100.0, -10.0, True)
+    off = read_fence("ArduPilot Copter", {**COPTER_FENCE, "FENCE_ENABLE": 0})
+    assert (off.radius_m, off.ceiling_m, off.acts) == (None, None, False)
+    assert not read_fence("ArduPilot Copter", {**COPTER_FENCE, "FENCE_ACTION": 0}).acts  # report only
+
+
+def test_conflicts_name_the_parameter_and_the_value_that_fits():
+    mission = small_mission()  # area north -100..500, east -300..300 from the launch point; 20 m; guard margin 20
+    short = read_fence("ArduPilot Copter", COPTER_FENCE)
+    (problem,) = fence_conflicts(short, mission, HOME, 20.0)
+    assert problem == ("FENCE_RADIUS 300 m is short of the search: the drone may fly 556 m from home; set it to at "
+                       "least 590 m (the mission's geofence)")
+    assert fence_conflicts(read_fence("ArduPilot Copter", {**COPTER_FENCE, "FENCE_RADIUS": 560.0}), mission, HOME,
+                           20.0) == []
+    low = read_fence("PX4", {**PX4_FENCE, "GF_MAX_VER_DIST": 22.0})
+    assert fence_conflicts(low, mission, HOME, 20.0) == [
+        "GF_MAX_VER_DIST 22 m is too low for the search altitude 20 m; set it to at least 25 m"]
+    floor = read_fence("ArduPilot Copter", {**COPTER_FENCE, "FENCE_TYPE": 8, "FENCE_ALT_MIN": 18.0})
+    assert fence_conflicts(floor, mission, HOME, 20.0) == [
+        "FENCE_ALT_MIN 18 m is too high for the close looks down to 20 m; set it to at most 15 m"]
+    warned = read_fence("PX4", {**PX4_FENCE, "GF_ACTION": 1, "GF_MAX_HOR_DIST": 100.0})
+    assert fence_conflicts(warned, mission, HOME, 20.0) == []  # it only warns: nothing stops the search
+
+
+def test_a_missing_fence_is_a_warning_with_the_setting_that_would_add_it():
+    record, refusal, note = judge_autopilot_fence("PX4", PX4_FENCE, small_mission(), HOME, 20.0)
+    assert refusal is None and record == {"checked": True, "acts": False,
+                                          "description": "no limit set, on a breach: Hold"}
+    assert note == ("the autopilot's own geofence does not act (no limit set, on a breach: Hold): only the runner's "
+                    "guard keeps the drone in the mission's area; GF_MAX_HOR_DIST=590 (GF_ACTION 2: Hold) would add "
+                    "the autopilot's fence around it")
+
+
+@pytest.mark.parametrize("autopilot, params, refusal", [
+    ("px4", {"GF_MAX_HOR_DIST": 400.0}, "GF_MAX_HOR_DIST 400 m is short of the search"),
+    ("ardupilot", {"FENCE_ENABLE": 1}, "FENCE_RADIUS 300 m is short of the search")])
+def test_the_runner_reads_the_vehicles_fence_and_refuses_one_that_would_stop_the_search(policy, autopilot, params,
+                                                                                        refusal):
+    report = fly(policy, autopilot, params=params)
+    (abort,) = events(report, "abort")
+    assert abort.startswith("refused before arming: the autopilot's own geofence would stop the search: " + refusal)
+    assert states(report) == ["CONNECT", "PREFLIGHT", "DONE"] and not report["trajectory"]
+
+
+@pytest.mark.parametrize("autopilot, params, description", [
+    ("px4", {"GF_MAX_HOR_DIST": 600.0, "GF_MAX_VER_DIST": 120.0},
+     "GF_MAX_HOR_DIST 600 m, GF_MAX_VER_DIST 120 m, on a breach: Hold"),
+    ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 600.0},
+     "FENCE_RADIUS 600 m, FENCE_ALT_MAX 100 m, on a breach: RTL or Land")])
+def test_a_fence_that_encloses_the_mission_is_recorded_and_flown(policy, autopilot, params, description):
+    report = fly(outbound(policy), autopilot, params=params)
+    assert report["autopilot_fence"] == {"checked": True, "acts": True, "description": description}
+    assert events(report, "autopilot-fence") == [description]
+    assert report["outcome"]["outcome"] == "completed" and report["outcome"]["vehicle_failsafes"] == []
+
+
+def test_without_answers_the_fence_is_not_checked_and_the_flight_goes_on(policy, monkeypatch):
+    monkeypatch.setattr(VehicleLink, "request_params", lambda self, names: None)
+    report = fly(policy, "px4")
+    assert report["autopilot_fence"] == {"checked": False, "reason": "reading the autopilot's fence parameters: "
+                                                                     "not within 5 s"}
+    assert events(report, "autopilot-fence") == ["not checked (reading the autopilot's fence parameters: not "
+                                                 "within 5 s)"]
+    assert report["outcome"]["outcome"] == "completed"
