@@ -7,6 +7,7 @@ port like ArduPilot SITL's SERIAL0 (``--master=tcp:...``). Every wait is bounded
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import queue
@@ -97,20 +98,26 @@ def return_home(mavproxy: MavProxy, vehicle, command: str, answer: str) -> None:
     assert vehicle.state.on_ground and abs(vehicle.state.north_m) < 1.5
 
 
-def test_mavproxy_flies_the_px4_personality(udp_ports, tmp_path):
+@contextlib.contextmanager
+def px4_and_mavproxy(udp_ports, tmp_path):
+    """The PX4 personality at SPEED and a MAVProxy on its GCS link, as QGroundControl would be; yields both."""
     api_port, api_remote, gcs_port, gcs_remote = udp_ports
     ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_port=gcs_port, gcs_remote_port=gcs_remote)
     with VehicleServer(VehicleConfig(seed=3), ports, speed=SPEED) as server:
-        vehicle = server.vehicle
         mavproxy = MavProxy(f"udpin:127.0.0.1:{gcs_remote}", tmp_path)
         try:
-            start = px4_offboard_north(mavproxy, vehicle, setpoints=15)
-            assert vehicle.autopilot.mode is FlightMode.OFFBOARD
-            assert vehicle.state.north_m - start > 3.0
-            return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
+            yield server.vehicle, mavproxy
         finally:
             mavproxy.close()
-        assert server.error is None and vehicle.handler_errors == 0
+        assert server.error is None and server.vehicle.handler_errors == 0
+
+
+def test_mavproxy_flies_the_px4_personality(udp_ports, tmp_path):
+    with px4_and_mavproxy(udp_ports, tmp_path) as (vehicle, mavproxy):
+        start = px4_offboard_north(mavproxy, vehicle, setpoints=15)
+        assert vehicle.autopilot.mode is FlightMode.OFFBOARD
+        assert vehicle.state.north_m - start > 3.0
+        return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
 
 
 def px4_offboard_north(mavproxy: MavProxy, vehicle, setpoints: int, params: tuple[str, ...] = ()) -> float:
@@ -141,21 +148,13 @@ def px4_offboard_north(mavproxy: MavProxy, vehicle, setpoints: int, params: tupl
 def test_mavproxy_sees_px4s_geofence_hold_and_joins_its_chunked_text(udp_ports, tmp_path):
     """GF_MAX_HOR_DIST set from MAVProxy; flown past it, the vehicle holds and says why in a 54-character text,
     which STATUSTEXT carries in two chunks: MAVProxy prints it whole."""
-    api_port, api_remote, gcs_port, gcs_remote = udp_ports
-    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_port=gcs_port, gcs_remote_port=gcs_remote)
-    with VehicleServer(VehicleConfig(seed=3), ports, speed=SPEED) as server:
-        vehicle = server.vehicle
-        mavproxy = MavProxy(f"udpin:127.0.0.1:{gcs_remote}", tmp_path)
-        try:
-            px4_offboard_north(mavproxy, vehicle, setpoints=40, params=("GF_MAX_HOR_DIST 12",))
-            mavproxy.expect("Geofence violation: exceeding maximum distance to Home")
-            wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD, 5, "HOLD")
-            mavproxy.expect("Mode LOITER")  # PX4's HOLD, as pymavlink names it
-            assert 12.0 <= math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 16.0
-            return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
-        finally:
-            mavproxy.close()
-        assert server.error is None and vehicle.handler_errors == 0
+    with px4_and_mavproxy(udp_ports, tmp_path) as (vehicle, mavproxy):
+        px4_offboard_north(mavproxy, vehicle, setpoints=40, params=("GF_MAX_HOR_DIST 12",))
+        mavproxy.expect("Geofence violation: exceeding maximum distance to Home")
+        wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD, 5, "HOLD")
+        mavproxy.expect("Mode LOITER")  # PX4's HOLD, as pymavlink names it
+        assert 12.0 <= math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 16.0
+        return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
 
 
 def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tmp_path):
