@@ -31,6 +31,10 @@ from sitl_bridge.vehicle import VehicleConfig  # noqa: E402
 pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
 SPEED = 2.0  # simulated seconds per wall second
 T = 10.0  # default bound on one await, wall seconds
+AT_THE_POINT_M = 2.5
+"""How far the vehicle's true position may be from a point it was sent to once MAVSDK reports it there (within
+1e-5 degrees): the autopilot steers on its GPS fix, whose error is a wandering bias of 0.5 m std per axis plus 0.3 m
+of noise (sitl_bridge/sensors.py), about 0.8 m radial std; 1.5 m failed once in a fresh clone (1.69 m)."""
 
 
 async def first(stream, predicate, timeout_s: float, what: str):
@@ -192,7 +196,7 @@ def test_mavsdk_goto_example_flies_to_the_point_and_holds(udp_ports):
         flying_alt = asyncio.run(asyncio.wait_for(fly_goto_example(mavsdk_port, server, target), 120))
         assert server.error is None and server.vehicle.handler_errors == 0
         state = server.vehicle.state
-        assert math.hypot(state.north_m - 70.0, state.east_m + 100.0) < 1.5
+        assert math.hypot(state.north_m - 70.0, state.east_m + 100.0) < AT_THE_POINT_M
         assert config.home.alt_m - state.down_m == pytest.approx(flying_alt, abs=1.0)
         assert server.vehicle.autopilot.armed and not state.on_ground
 
@@ -371,7 +375,7 @@ def test_mavsdk_offboard_global_position_flies_to_the_point(udp_ports):
         assert server.error is None and server.vehicle.handler_errors == 0
         state = server.vehicle.state
         assert not server.vehicle.autopilot.setpoints_ignored
-    assert mode == "OFFBOARD" and math.hypot(state.north_m - 40.0, state.east_m - 25.0) < 1.5
+    assert mode == "OFFBOARD" and math.hypot(state.north_m - 40.0, state.east_m - 25.0) < AT_THE_POINT_M
     assert math.degrees(state.yaw_rad) == pytest.approx(90.0, abs=3.0)
 
 # --- MAVSDK and the ArduPilot personality -------------------------------------------------------------------------
@@ -419,7 +423,7 @@ def test_mavsdk_flies_ardupilot_take_off_goto_and_land_once_the_companion_link_s
         assert server.error is None and server.vehicle.handler_errors == 0
         state = server.vehicle.state
     assert modes == ["STABILIZE", "GUIDED", "GUIDED", "LAND"]  # armed in STABILIZE, ArduCopter's INITIAL_MODE 0
-    assert math.hypot(state.north_m - start.north_m - 60.0, state.east_m - start.east_m) < 1.5  # landed there
+    assert math.hypot(state.north_m - start.north_m - 60.0, state.east_m - start.east_m) < AT_THE_POINT_M  # landed
     assert state.on_ground and not server.vehicle.autopilot.armed
 
 
