@@ -334,3 +334,6 @@ def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, t
     assert [t["to"] for t in report["transitions"]] == ALL_STATES and report["backend"] == "mavsdk"
     assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20  # at least the 1.2 s lead
     assert "mode OFFBOARD" in vehicle_log and "Task was destroyed" not in result.stderr
+    # the autopilot's fence parameters, read through MAVSDK's Param plugin (GF_ACTION an INT32, the others floats)
+    assert report["autopilot_fence"] == {"checked": True, "acts": False,
+                                         "description": "no limit set, on a breach: Hold"}
