@@ -14,7 +14,8 @@ home (no fence upload: the mission protocol is not emulated). Mixins of the two 
   further out, the floor enabled once above FENCE_ALT_MIN + FENCE_MARGIN and off while landing or landed,
   ``pre_arm_check`` texts, ``print_fence_message``) and ``ArduCopter/fence.cpp`` ``Copter::fence_check`` (the action
   on a new breach; landed: disarm; more than 100 m out: LAND), ``Copter::set_mode`` (a mode change during a breach
-  starts the 10 s manual recovery in which breaches are ignored).
+  starts the 10 s manual recovery: ``AC_Fence::check`` still tracks breaches, done last "so that _breached_fences is
+  correct", but returns no new one, so nothing acts).
 """
 from __future__ import annotations
 
@@ -122,9 +123,11 @@ class CopterFence:
         return None
 
     def _fence_recovery_start(self, now: float) -> None:
-        """Copter::set_mode: a mode change during a breach is a pilot recovering; breaches are ignored a while."""
+        """Copter::set_mode → AC_Fence::manual_recovery_start: a mode change during a breach is a pilot recovering;
+        for a while breaches are still tracked but start no action."""
         if self.fence_breaches and int(self.params["FENCE_ACTION"]):
             self._fence_recovery_until_s = now + MANUAL_RECOVERY_S
+            self._event(now, "Manual recovery started")
 
     def _check_fence(self, now: float, state: VehicleState, landing_or_landed: bool) -> None:
         """Copter::fence_checks_async + fence_check; called every tick, armed or not."""
@@ -138,7 +141,7 @@ class CopterFence:
             self._fence_floor_enabled = False
             self.fence_breaches &= ~ALT_MIN
             self._event(now, "Min Alt fence auto-disabled", mavlink.MAV_SEVERITY_NOTICE)
-        if not configured or now < self._fence_recovery_until_s:
+        if not configured:
             return
         distances = self._fence_distances(state)
         new = 0
@@ -158,7 +161,7 @@ class CopterFence:
             self._event(now, "Min Alt fence enabled (auto enable)", mavlink.MAV_SEVERITY_NOTICE)
         if was_breached and not self.fence_breaches and not self.land_complete:
             self._event(now, "Fence breach cleared", mavlink.MAV_SEVERITY_NOTICE)
-        if new and self.armed:
+        if new and self.armed and now >= self._fence_recovery_until_s:  # check() returns 0 during a recovery
             self._fence_action(new, max(distances[fence] for fence in distances if new & fence), now, state)
 
     def _fence_action(self, new: int, past_m: float, now: float, state: VehicleState) -> None:
