@@ -22,7 +22,7 @@ for run in "${HRL[@]}"; do
         hrlsac evaluate "$run" --split test --episodes 1000 --workers 2 --constant-goal $goal --flight-rules
     done
 done
-OUT=docs/results/comparison-capped
+OUT=${OUT:-docs/results/comparison-capped}  # comparison-avx2 sets its own (docs/results/README.md)
 hrlsac compare "${HRL[@]}" "${SAC[@]}" --out $OUT --episodes 1000
 hrlsac compare "${HRL[@]}" "${SAC[@]}" --out $OUT-flight --episodes 1000 --flight-rules
 hrlsac compare "${HRL[@]}" "${SAC[@]}" --out $OUT-large --episodes 1000 --generator $LARGE
