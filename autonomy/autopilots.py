@@ -53,8 +53,8 @@ class AutopilotFlavour:
     """The mode to request before arming (None: arm in whatever mode the vehicle is in)."""
     failsafe_modes: frozenset[str]
     """Modes the autopilot's own link-loss failsafes switch to."""
-    failsafe_text: re.Pattern
-    """STATUSTEXTs (lower case) that announce such a (link-loss) failsafe."""
+    failsafe_text: re.Pattern | None
+    """STATUSTEXTs (lower case) that announce such a (link-loss) failsafe (None: the autopilot names no cause)."""
     safety_text: re.Pattern
     """STATUSTEXTs (lower case) that announce one of the autopilot's other failsafes (geofence, battery, estimator):
     a mode change they explain is the autopilot keeping the drone safe, and the search must not resume over it."""
@@ -81,7 +81,11 @@ class AutopilotFlavour:
 PX4 = AutopilotFlavour(
     name="PX4", companion_mode="OFFBOARD", takeoff_mode="TAKEOFF", arm_mode=None,
     failsafe_modes=frozenset({"POSCTL", "LOITER", "RTL", "LAND"}),
-    failsafe_text=re.compile(r"offboard.*(lost|loss)|no offboard signal"),
+    # PX4 >= 1.14 says "Failsafe activated" whatever the cause (FailsafeBase::notifyUser; the cause goes out as an
+    # event), so no STATUSTEXT announces the offboard-loss failsafe: silences and deaf stretches are the evidence.
+    # Its health checks' texts do name the geofence ("Geofence: exceeding maximum distance to Home") and the
+    # battery ("Critical battery", "Emergency battery level"): docs/runner.md.
+    failsafe_text=None,
     safety_text=re.compile(r"geofence|battery|estimator|navigation failure"),
     takeoff_altitude_amsl=True, setpoint_timeout_s=None)
 

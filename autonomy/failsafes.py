@@ -11,7 +11,9 @@ order (the first that applies wins):
 4. **policy stalled**: no decision applied for ``policy_stall_rtl_s``.
 5. **low battery**: at or below ``low_battery_pct``.
 6. **the vehicle left the companion mode** (OFFBOARD / GUIDED): the autopilot's own safety failsafe (its geofence,
-   the battery: announced) ends the search; the vehicle's own link-loss failsafe resumes it when
+   the battery: announced) ends the search; a switch into one of its failsafe modes is held for
+   ``link_loss.settle_s`` first (``wait``: a safety text may come just after it); the vehicle's own link-loss
+   failsafe then resumes it when
    ``autonomy.link_loss`` has the evidence and resumptions are left (``resume``); anything else is a pilot's
    decision (``end``).
 
@@ -38,7 +40,8 @@ class Verdict:
     message: str
     search_end: str | None = None
     mode: str | None = None
-    """"resume": the mode the vehicle's failsafe switched it to."""
+    """"resume": the mode the vehicle's failsafe switched it to; "wait": the mode being settled (None: waiting for
+    telemetry)."""
     evidence: str | None = None
     """"resume": why that switch was the vehicle's own link-loss failsafe."""
 
@@ -69,13 +72,20 @@ def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavo
     if mode != companion:
         safety = link_loss.safety_failsafe(now)
         if safety is not None:
+            link_loss.left_companion_s = None
             return Verdict("end", f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe "
                                   f"({safety!r})", f"vehicle switched to {mode}")
+        if link_loss.settling(now, mode):
+            return Verdict("wait", f"the vehicle left {companion} (now {mode}): holding {waiting.settle_s:g} s for "
+                                   "what the autopilot says before judging it", mode=mode)
+        link_loss.left_companion_s = None
         evidence = link_loss.failsafe_evidence(now, mode)
         if evidence is not None and link_loss.may_resume():
             return Verdict("resume", "", mode=mode, evidence=evidence)
         used_up = f"; {evidence}, but no resumption is left" if evidence is not None else ""
         return Verdict("end", f"the vehicle left {companion} (now {mode}){used_up}", f"vehicle switched to {mode}")
+    # In the companion mode (again: PX4 returns to OFFBOARD by itself once setpoints flow again): carry on.
+    link_loss.left_companion_s = None
     return None
 
 
@@ -85,5 +95,7 @@ def blind_reason(now: float, link_loss: LinkLossMonitor, estimator: PoseEstimato
     extrapolated over a gap, as after an autopilot reboot)."""
     if link_loss.link_down():
         return f"no telemetry for {gap_s:g} s"
+    if link_loss.left_companion_s is not None:
+        return "the vehicle left the companion mode"
     pose = estimator.predict_to(now)
     return f"no position fused for {pose.age_s:.1f} s" if pose.stale else None

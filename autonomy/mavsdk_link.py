@@ -23,7 +23,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand
-from autonomy.vehicle_link import CommandAck, LinkError
+from autonomy.vehicle_link import MAX_STATUS_TEXTS, CommandAck, LinkError, texts_after
 from missions.geodesy import GeoPoint
 
 _FLIGHT_MODES = {"HOLD": "LOITER", "RETURN_TO_LAUNCH": "RTL", "TAKEOFF": "TAKEOFF", "LAND": "LAND",
@@ -54,6 +54,8 @@ class MavsdkLink:
         self.last_vehicle_message_s: float | None = None
         self.acks: deque = deque(maxlen=64)
         self.status_texts: list[str] = []
+        self.status_log: deque = deque(maxlen=MAX_STATUS_TEXTS)
+        self.status_count = 0
         self.sent_heartbeats = 0  # MAVSDK sends the companion heartbeat itself
         self._mode: str | None = None
         self._armed = False
@@ -88,7 +90,7 @@ class MavsdkLink:
         self.action, self.offboard, self.telemetry = ActionAsync(system), OffboardAsync(system), TelemetryAsync(system)
         self.param = ParamAsync(system)
         for watch in (self._watch_position, self._watch_mode, self._watch_armed, self._watch_home,
-                      self._watch_battery):
+                      self._watch_battery, self._watch_status_text):
             self._loop.create_task(watch())
         self.target_system = 1
         return system
@@ -132,6 +134,13 @@ class MavsdkLink:
         async for battery in self.telemetry.subscribe_battery():
             self._battery = float(battery.remaining_percent)
 
+    async def _watch_status_text(self) -> None:
+        """The autopilot's STATUSTEXTs (MAVSDK joins chunked ones): the runner's safety vetoes read them."""
+        async for status in self.telemetry.subscribe_status_text():
+            self.status_texts = [*self.status_texts[1 - MAX_STATUS_TEXTS:], status.text]  # quoted in refusals
+            self.status_log.append((self.clock(), status.text))
+            self.status_count += 1  # after the append: the runner's thread reads the log by this count
+
     # ------------------------------------------------------------------ the VehicleLink interface
     def tick(self) -> list:
         samples, self._samples = self._samples, []
@@ -154,10 +163,8 @@ class MavsdkLink:
         """MAVSDK names modes and runs take-off and offboard itself, PX4-style, whatever the autopilot."""
         return mavlink.MAV_AUTOPILOT_PX4
 
-    status_count = 0  # MAVSDK's status texts are not collected
-
-    def status_since(self, count: int) -> list:
-        return []
+    def status_since(self, count: int) -> list[tuple[float, str]]:
+        return texts_after(self.status_log, self.status_count, count)
 
     def vehicle_description(self) -> str:
         return "autopilot found by MAVSDK"

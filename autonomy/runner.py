@@ -73,10 +73,10 @@ class MissionRunner:
         self.worker = DecisionWorker(pilot, threaded_policy, simulated_policy_s)
         self.boot_time = BootTimeMap(config.boot_time)
         self.flavour: AutopilotFlavour = PX4  # until the vehicle's heartbeat says otherwise
-        self.link_loss = LinkLossMonitor(config.link_loss, self.flavour)
+        self.link_loss = LinkLossMonitor(config.link_loss, self.flavour, self._probe_sender())
         self._texts_seen = 0
         self._link_back_s = -math.inf  # when telemetry last came back after a silence (decisions restart then)
-        self._waiting_reported = False
+        self._waiting_reported: str | None = None  # what the runner last said it waits for
         self._positions_seen_s: float | None = None
         self.state: str | None = None
         self.transitions: list[dict] = []
@@ -113,10 +113,16 @@ class MissionRunner:
         texts = self.link.status_since(self._texts_seen)
         self._texts_seen = self.link.status_count
         was_down = self.link_loss.link_down()
-        self.link_loss.observe(now, self.link.last_vehicle_message_s, texts)
+        replies = self.link.take_timesync_replies() if self.link_loss.probe is not None else []
+        self.link_loss.observe(now, self.link.last_vehicle_message_s, texts, replies,
+                               probing=self.state in ("OFFBOARD", "SEARCH"))
         if was_down and not self.link_loss.link_down():
             self._link_back_s = now
         self.streamer.tick(now)
+
+    def _probe_sender(self) -> Callable[[int], None] | None:
+        """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; not the MAVSDK backend)."""
+        return getattr(self.link, "send_timesync_request", None)
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str,
                    repeat: tuple[float, Callable[[], None]] | None = None) -> None:
@@ -182,7 +188,7 @@ class MissionRunner:
             self.flavour = flavour_for(self.link.autopilot)
         except UnsupportedAutopilot as exc:
             raise MissionAborted(str(exc)) from None
-        self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour)
+        self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour, self._probe_sender())
         self.link.request_params(fence_params(self.flavour.name))  # read while the pose estimate converges
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
 
@@ -272,7 +278,8 @@ class MissionRunner:
             if blind is not None:  # no pose to act on: stop, and decide again once it is fresh
                 if self.streamer.latest != HOLD:
                     self.streamer.command(HOLD, now)
-                    self._event("link", f"{blind}: holding position")
+                    if self.link_loss.left_companion_s is None:  # a settling mode change says so itself
+                        self._event("link", f"{blind}: holding position")
             elif now + 1e-9 >= next_decision and not self.worker.busy:
                 pose = self.estimator.predict_to(now)
                 self.trajectory.append((round(now, 3), float(pose.position_ned[0]), float(pose.position_ned[1])))
@@ -320,14 +327,16 @@ class MissionRunner:
         """Act on ``autonomy.failsafes.judge_search``: wait for lost telemetry (said once), end or resume."""
         if self.search_end is not None:
             return
-        resumed_s = max(self._last_decision_s, self.transitions[-1]["time_s"], self._link_back_s)
+        settle = self.link_loss.left_companion_s  # decisions pause while a mode change settles: not a stall
+        resumed_s = max(self._last_decision_s, self.transitions[-1]["time_s"], self._link_back_s,
+                        -math.inf if settle is None else settle)
         verdict = judge_search(now, self.link, self.config, self.flavour, self.link_loss, self.boot_time, resumed_s)
         if verdict is not None and verdict.action == "wait":
-            if not self._waiting_reported:
-                self._waiting_reported = True
+            if self._waiting_reported != (verdict.mode or ""):  # each wait said once
+                self._waiting_reported = verdict.mode or ""
                 self._event("link", verdict.message)
             return
-        self._waiting_reported = False
+        self._waiting_reported = None
         if verdict is None:
             return
         if verdict.action == "resume":

@@ -44,6 +44,14 @@ _URL = re.compile(r"^(udpin|udpout|tcp):[^:]+:\d{1,5}$")
 _NOT_A_VEHICLE = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
 
 
+def texts_after(log: deque, total: int, count: int) -> list[tuple[float, str]]:
+    """The (time, text) STATUSTEXTs of ``log`` received after the first ``count`` of ``total`` ever received (at
+    most the last MAX_STATUS_TEXTS, which the log keeps)."""
+    entries = list(log)
+    new = min(total - count, len(entries))
+    return entries[len(entries) - new:] if new > 0 else []
+
+
 class LinkError(RuntimeError):
     """The connection cannot be opened or the vehicle misbehaves; one line naming the problem."""
 
@@ -118,6 +126,8 @@ class VehicleLink:
     _params_wanted: set = field(default_factory=set, init=False)
     _vehicle_signs: bool = field(default=False, init=False)
     _next_heartbeat_s: float = -math.inf  # the first tick sends and anchors the 1 Hz schedule
+    timesync_replies: list = field(default_factory=list, init=False)
+    """ts1 of the TIMESYNC replies received since the runner last took them (autonomy.uplink_probe)."""
 
     def __post_init__(self) -> None:
         self.conn.mav.set_send_callback(self._on_send)
@@ -199,30 +209,35 @@ class VehicleLink:
             self.acks.append(CommandAck(msg.command, msg.result, now))
         elif msg.get_type() == "PARAM_VALUE" and msg.param_id in self._params_wanted:
             self.params[msg.param_id] = self._param_number(msg)
+        elif msg.get_type() == "TIMESYNC" and msg.tc1 != 0:  # a reply (tc1 = 0 is the vehicle's own request)
+            self.timesync_replies.append(msg.ts1)
+            del self.timesync_replies[:-1000]
         elif msg.get_type() == "STATUSTEXT":
-            text = self._join_statustext(msg)
-            if text is not None:
+            for text in self._join_statustext(msg):
                 self.status_texts.append(text)
                 del self.status_texts[:-MAX_STATUS_TEXTS]
                 self.status_log.append((now, text))
                 self.status_count += 1
         return True
 
-    def _join_statustext(self, msg) -> str | None:
-        """The whole text of a STATUSTEXT, or None while a chunked one is incomplete. MAVLink: id 0 is a text of one
-        message; chunks of a longer one share a non-zero id, and the chunk shorter than the 50-byte field is the
-        last (PX4 and ArduPilot split texts so; an incomplete text is dropped when the next id starts)."""
+    def _join_statustext(self, msg) -> list[str]:
+        """The texts a STATUSTEXT completes (none while a chunked one goes on). MAVLink: id 0 is a text of one
+        message; chunks of a longer one share an id, and the chunk shorter than the 50-byte field is the last.
+        PX4 gives every text an id and sends nothing after a full last chunk (STATUSTEXT.hpp), so a text waiting
+        for more is also complete when another id starts (and then comes before it)."""
         text_id = getattr(msg, "id", 0) or 0
-        if not text_id:
-            return msg.text
         parts = self._statustext_parts
+        done = [parts["text"]] if parts and parts["id"] != text_id else []
+        if not text_id:
+            self._statustext_parts = {}
+            return done + [msg.text]
         if parts.get("id") != text_id:
             parts = self._statustext_parts = {"id": text_id, "text": ""}
         parts["text"] = (parts["text"] + msg.text)[:MAX_STATUSTEXT_CHARS]  # a hostile vehicle must not grow memory
         if len(msg.text.encode()) >= STATUSTEXT_LEN:
-            return None
+            return done
         self._statustext_parts = {}
-        return parts["text"]
+        return done + [parts["text"]]
 
     def _forget_pymavlink_state(self, msg) -> None:
         """pymavlink's connection keeps the last message of every type per system and every parameter it hears;
@@ -257,9 +272,7 @@ class VehicleLink:
         return None if beat is None else beat.autopilot
 
     def status_since(self, count: int) -> list[tuple[float, str]]:
-        """The (time, text) STATUSTEXTs received after the first ``count`` (at most the last MAX_STATUS_TEXTS)."""
-        new = min(self.status_count - count, len(self.status_log))
-        return list(self.status_log)[len(self.status_log) - new:] if new > 0 else []
+        return texts_after(self.status_log, self.status_count, count)
 
     @property
     def armed(self) -> bool:
@@ -326,6 +339,14 @@ class VehicleLink:
     def request_message(self, message_id: int) -> None:
         """MAV_CMD_REQUEST_MESSAGE: send ``message_id`` once (HOME_POSITION, which ArduPilot does not stream)."""
         self.send_command(mavlink.MAV_CMD_REQUEST_MESSAGE, (message_id,))
+
+    def send_timesync_request(self, ts1: int) -> None:
+        """TIMESYNC with tc1 = 0: PX4 and ArduPilot answer at once, echoing ``ts1`` (autonomy.uplink_probe)."""
+        self._mav.timesync_send(0, ts1)
+
+    def take_timesync_replies(self) -> list[int]:
+        replies, self.timesync_replies = self.timesync_replies, []
+        return replies
 
     def send_velocity(self, command: VelocityCommand, now_s: float) -> None:
         del now_s  # the stream's schedule; the message carries our boot time

@@ -39,11 +39,10 @@ from sitl_bridge.vehicle import SimulatedVehicle
 
 SAFE_PHASES = ("holding", "returning", "landing")
 """Phases (autopilot_base.FlightStatus.phase) an armed vehicle may end in safely."""
-FAILSAFE_TEXT = re.compile(r"^(Failsafe|GCS Failsafe(?! Cleared)|Battery Failsafe|Geofence violation"
-                           r"|.* fences? breached$)")
-"""The vehicle's own failsafe announcements: PX4-style "Failsafe: ...", ArduPilot's "GCS Failsafe", "Battery
-Failsafe" (not the "GCS Failsafe Cleared" that ends one), PX4's "Geofence violation: ..." and ArduPilot's
-"Circle fence breached"."""
+FAILSAFE_TEXT = re.compile(r"^(Failsafe: |GCS Failsafe(?! Cleared)|Battery Failsafe|.* fences? breached$)")
+"""The vehicle's own failsafes in its log: the PX4 personality's "Failsafe: <cause>, switching to <mode>" (its log
+line; over MAVLink PX4 says only "Failsafe activated"), ArduPilot's "GCS Failsafe", "Battery Failsafe" (not the
+"GCS Failsafe Cleared" that ends one) and "Circle fence breached"."""
 STOPPED_MPS = 0.5
 
 

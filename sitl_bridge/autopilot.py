@@ -51,6 +51,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
+    STATUSTEXT_ID_PER_TEXT = True
     MAV_AUTOPILOT = mavlink.MAV_AUTOPILOT_PX4
     CAPABILITIES = CAPABILITIES
     FLIGHT_SW_VERSION = FLIGHT_SW_VERSION
@@ -149,7 +150,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             self.hold_target = (state.north_m, state.east_m, 0.0)
         elif mode is FlightMode.RTL:
             self.rtl_landing = False
-        self._event(now, f"mode {mode.name} ({reason})")
+        self._event(now, f"mode {mode.name} ({reason})", broadcast=False)  # PX4 announces no mode change in text
         return ACCEPTED
 
     def arm(self, now: float, state: VehicleState, force: bool) -> int:
@@ -392,17 +393,27 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             last = self.setpoint.time_s if self.setpoint else -math.inf
             action = FAILSAFE_MODES.get(int(self.params["COM_OBL_RC_ACT"]), FlightMode.HOLD)
             why = f"offboard setpoints lost for {now - last:.1f} s" if self.gps_ok else "no position estimate"
-            self._event(now, f"Failsafe: {why}, switching to {action.name}", mavlink.MAV_SEVERITY_CRITICAL)
-            self.set_mode(action, now, state, "offboard loss failsafe")
+            self._failsafe(now, state, action, why)
         self._check_geofence(now, state)
         if state.on_ground:
             return
         fraction = state.battery_wh / self.airframe.battery_capacity_wh
         if fraction <= self.params["BAT_EMERGEN_THR"] and self.battery_failsafe != "emergency":
             self.battery_failsafe = "emergency"
-            self._event(now, f"Failsafe: battery {fraction:.0%}, landing", mavlink.MAV_SEVERITY_EMERGENCY)
-            self.set_mode(FlightMode.LAND, now, state, "battery emergency")
+            self._event(now, "Emergency battery level\t", mavlink.MAV_SEVERITY_EMERGENCY)  # batteryCheck.cpp
+            self._failsafe(now, state, FlightMode.LAND, f"battery {fraction:.0%}")
         elif fraction <= self.params["BAT_CRIT_THR"] and not self.battery_failsafe:
             self.battery_failsafe = "critical"
-            self._event(now, f"Failsafe: battery {fraction:.0%}, returning", mavlink.MAV_SEVERITY_CRITICAL)
-            self.set_mode(FlightMode.RTL, now, state, "battery critical")
+            self._event(now, "Critical battery\t", mavlink.MAV_SEVERITY_EMERGENCY)
+            self._failsafe(now, state, FlightMode.RTL, f"battery {fraction:.0%}")
+
+    def _failsafe(self, now: float, state: VehicleState, action: FlightMode | None, why: str) -> None:
+        """Commander's failsafe reaction: switch to ``action`` (None: warn only). What PX4 >= 1.14 tells a ground
+        station in text is only "Failsafe activated" (``FailsafeBase::notifyUser``: the cause and the action go out
+        as events, which MAVLink STATUSTEXT readers do not see; the tab marks a text an event also carries). The
+        cause and the action are kept in the vehicle's own log."""
+        self._event(now, "Failsafe activated\t", mavlink.MAV_SEVERITY_CRITICAL)
+        self._event(now, f"Failsafe: {why}, " + (f"switching to {action.name}" if action else "warning only"),
+                    mavlink.MAV_SEVERITY_CRITICAL, broadcast=False)
+        if action is not None:
+            self.set_mode(action, now, state, "failsafe")

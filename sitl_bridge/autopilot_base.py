@@ -121,6 +121,10 @@ class AutopilotBase:
 
     PARAMS_BYTEWISE = False
     """True: integer parameters travel with their bytes in the float field (PX4); False: as float values."""
+    STATUSTEXT_ID_PER_TEXT = False
+    """True: every STATUSTEXT gets the next id, whatever its length, and a text filling its last chunk ends there
+    (PX4's STATUSTEXT stream); False: only texts over 50 bytes get an id, and one filling its last chunk is followed
+    by an empty chunk (ArduPilot's GCS::send_textv)."""
 
     def __init__(self, params: ParameterStore, airframe: MultirotorParams, frame: LocalFrame):
         self.params = params

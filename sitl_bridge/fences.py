@@ -39,14 +39,15 @@ class Px4Geofence:
     _geofence_checked_s = -math.inf
 
     def geofence_violations(self, state: VehicleState) -> list[str]:
-        """geofenceCheck.cpp's texts for what the position breaches (empty when inside or the fence is off)."""
+        """What the position breaches, in the texts geofenceCheck.cpp sends as STATUSTEXT (its legacy mavlink_log
+        path; "Geofence violation: ..." is the events-protocol wording), empty when inside or the fence is off."""
         home_n, home_e, home_d = self.home_ned
         max_hor, max_ver = self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"]
         violations = []
         if max_hor > 0 and math.hypot(state.north_m - home_n, state.east_m - home_e) >= max_hor:
-            violations.append("Geofence violation: exceeding maximum distance to Home")
+            violations.append("Geofence: exceeding maximum distance to Home")
         if max_ver > 0 and home_d - state.down_m >= max_ver:
-            violations.append("Geofence violation: exceeding maximum altitude above Home")
+            violations.append("Geofence: exceeding maximum altitude above Home")
         return violations if int(self.params["GF_ACTION"]) else []
 
     def _check_geofence(self, now: float, state: VehicleState) -> None:
@@ -62,8 +63,7 @@ class Px4Geofence:
         if violations and not self.geofence_breached:
             for text in violations:
                 self._event(now, text, mavlink.MAV_SEVERITY_CRITICAL)
-            if action in PX4_ACTIONS:
-                self.set_mode(PX4_ACTIONS[action], now, state, "geofence failsafe")
+            self._failsafe(now, state, PX4_ACTIONS.get(action), "geofence breached")
         self.geofence_breached = bool(violations)
 
 

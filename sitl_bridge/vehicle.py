@@ -79,7 +79,7 @@ class SimulatedVehicle(MessageHandlers):
         self.links = list(links)
         self.endpoints = self._make_endpoints()
         self.on_event = on_event
-        self._statustext_id = 0  # the last id given to a chunked STATUSTEXT
+        self._statustext_id = 0  # PX4: the next STATUSTEXT's id; ArduPilot: the last id given to a long one
         self.unhandled: dict[str, int] = {}
         self.handler_errors = 0
         self.signing_timestamp = signing_timestamp or simulated_timestamp(lambda: self.time_s)
@@ -162,18 +162,21 @@ class SimulatedVehicle(MessageHandlers):
             self._send_telemetry()
 
     def _send_statustext(self, severity: int, text: str) -> None:
-        """STATUSTEXT carries 50 bytes: a longer text goes in chunks that share a non-zero id, numbered by chunk_seq
-        (PX4's STATUSTEXT stream and ArduPilot's GCS::send_textv both split them so; MAVProxy joins them)."""
+        """STATUSTEXT carries 50 bytes: a longer text goes in chunks that share an id, numbered by chunk_seq (MAVLink
+        readers join them), each autopilot with its own rules for ids and the last chunk (STATUSTEXT_ID_PER_TEXT)."""
         data = text.encode()
-        if len(data) <= STATUSTEXT_LEN:
+        if self.autopilot.STATUSTEXT_ID_PER_TEXT:  # PX4: msg.id = _id++ for every text, from 0; no closing chunk
+            text_id, self._statustext_id = self._statustext_id, (self._statustext_id + 1) % 0x10000
+            starts = range(0, len(data), STATUSTEXT_LEN)
+        elif len(data) <= STATUSTEXT_LEN:
             self.broadcast(mavlink.MAVLink_statustext_message(severity, data, 0, 0))
             return
-        self._statustext_id = self._statustext_id % 0xFFFF + 1
-        # a text filling its last chunk gets an empty one after it, so the last chunk is always the short one
-        # (ArduPilot's send_textv does so; PX4 stops at the full chunk)
-        for seq, start in enumerate(range(0, len(data) + 1, STATUSTEXT_LEN)):
+        else:  # ArduPilot: a non-zero id for long texts only; a full last chunk gets an empty one after it
+            text_id = self._statustext_id = self._statustext_id % 0xFFFF + 1
+            starts = range(0, len(data) + 1, STATUSTEXT_LEN)
+        for seq, start in enumerate(starts):
             chunk = data[start:start + STATUSTEXT_LEN]
-            self.broadcast(mavlink.MAVLink_statustext_message(severity, chunk, self._statustext_id, seq))
+            self.broadcast(mavlink.MAVLink_statustext_message(severity, chunk, text_id, seq))
 
     def _flush_events(self) -> None:
         ap = self.autopilot

@@ -21,8 +21,8 @@ ACCEPTED, FAILED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_FAILED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 ARM, TAKEOFF = mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_NAV_TAKEOFF
 LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
-PX4_DISTANCE_TEXT = "Geofence violation: exceeding maximum distance to Home"
-PX4_ALTITUDE_TEXT = "Geofence violation: exceeding maximum altitude above Home"
+PX4_DISTANCE_TEXT = "Geofence: exceeding maximum distance to Home"
+PX4_ALTITUDE_TEXT = "Geofence: exceeding maximum altitude above Home"
 
 
 def texts(pilot: LockstepPilot, since: int = 0) -> list[str]:
@@ -216,19 +216,27 @@ def test_copter_fence_prearm_checks():
 
 
 # ---------------------------------------------------------------- long texts
-def test_px4_breach_text_comes_in_two_chunks_and_the_runners_link_joins_them():
+LONG = "x" * 50 + "y" * 50  # fills two chunks exactly
+CHUNKS = {  # (id, chunk_seq, text) on the wire for "short", LONG, the geofence text
+    "px4": [(0, 0, "short"), (1, 0, LONG[:50]), (1, 1, LONG[50:]), (2, 0, PX4_DISTANCE_TEXT)],  # STATUSTEXT.hpp
+    "ardupilot": [(0, 0, "short"), (1, 0, LONG[:50]), (1, 1, LONG[50:]), (1, 2, ""),  # GCS::send_textv
+                  (0, 0, PX4_DISTANCE_TEXT)]}
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_long_texts_go_in_chunks_as_each_autopilot_sends_them_and_the_runners_link_joins_them(autopilot):
+    """PX4 numbers every text and sends nothing after a full last chunk; ArduPilot numbers long texts only and
+    closes a full one with an empty chunk. The runner's link gets the same three texts from both."""
     vehicle_end, client_end = memory_link_pair()
-    vehicle = SimulatedVehicle(VehicleConfig(seed=4), [vehicle_end])
+    vehicle = SimulatedVehicle(VehicleConfig(autopilot=autopilot, seed=4), [vehicle_end])
     link = VehicleLink(MemoryMavConnection(client_end, source_system=1, source_component=191), lambda: vehicle.time_s)
     for _ in range(100):  # a second: the vehicle boots and the link hears it
         vehicle.step()
         link.tick()
     received = []
-    for text in ("short", PX4_DISTANCE_TEXT, PX4_ALTITUDE_TEXT):
+    for text in ("short", LONG, PX4_DISTANCE_TEXT):
         vehicle.autopilot._event(vehicle.time_s, text, mavlink.MAV_SEVERITY_CRITICAL)
         vehicle.step()
         received += [m for m in link.tick() if m.get_type() == "STATUSTEXT"]
-    assert [(m.id, m.chunk_seq, m.text) for m in received] == [
-        (0, 0, "short"), (1, 0, PX4_DISTANCE_TEXT[:50]), (1, 1, PX4_DISTANCE_TEXT[50:]),
-        (2, 0, PX4_ALTITUDE_TEXT[:50]), (2, 1, PX4_ALTITUDE_TEXT[50:])]
-    assert link.status_texts[-3:] == ["short", PX4_DISTANCE_TEXT, PX4_ALTITUDE_TEXT]
+    assert [(m.id, m.chunk_seq, m.text) for m in received] == CHUNKS[autopilot]
+    assert link.status_texts[-3:] == ["short", LONG, PX4_DISTANCE_TEXT]

@@ -150,7 +150,7 @@ def test_mavproxy_sees_px4s_geofence_hold_and_joins_its_chunked_text(udp_ports, 
     which STATUSTEXT carries in two chunks: MAVProxy prints it whole."""
     with px4_and_mavproxy(udp_ports, tmp_path) as (vehicle, mavproxy):
         px4_offboard_north(mavproxy, vehicle, setpoints=40, params=("GF_MAX_HOR_DIST 12",))
-        mavproxy.expect("Geofence violation: exceeding maximum distance to Home")
+        mavproxy.expect("Geofence: exceeding maximum distance to Home")
         wait_until(lambda: vehicle.autopilot.mode is FlightMode.HOLD, 5, "HOLD")
         assert 12.0 <= math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 16.0
         return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")

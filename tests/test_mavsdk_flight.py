@@ -449,3 +449,26 @@ def test_mavsdk_on_a_default_ardupilot_knows_home_but_no_health_and_can_still_ar
     assert not (health.is_global_position_ok or health.is_local_position_ok or health.is_armable
                 or health.is_gyrometer_calibration_ok)
     assert armed
+
+
+def test_the_runners_mavsdk_link_hears_the_autopilots_status_texts(udp_ports):
+    """The runner's safety vetoes read the autopilot's STATUSTEXTs (autonomy.link_loss): the MAVSDK backend gets them
+    from Telemetry.status_text, joined as the pymavlink backend joins them."""
+    import time
+
+    from autonomy.mavsdk_link import MavsdkLink
+
+    server, mavsdk_port = vehicle_server(udp_ports, 11)
+    with server:
+        link = MavsdkLink(f"udpin:0.0.0.0:{mavsdk_port}", time.monotonic)
+        try:
+            text = "Geofence: exceeding maximum distance to Home"  # PX4's health check text (sitl_bridge.fences)
+            deadline = time.monotonic() + T
+            while text not in [t for _, t in link.status_since(0)] and time.monotonic() < deadline:
+                server.vehicle.autopilot._event(server.vehicle.time_s, text, 2)  # again until MAVSDK has subscribed
+                time.sleep(0.5)
+            received = [t for _, t in link.status_since(0)]
+        finally:
+            link.close()
+    assert text in received and link.status_count == len(received)
+    assert link.status_since(link.status_count) == []

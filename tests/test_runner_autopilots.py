@@ -110,7 +110,7 @@ def outbound(policy: Policy) -> Policy:
 
 
 @pytest.mark.parametrize("autopilot, fence, mode, text", [
-    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "LOITER", "Geofence violation: exceeding maximum distance to Home"),
+    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "LOITER", "Failsafe: geofence breached, switching to HOLD"),  # its log
     ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "RTL", "Circle fence breached")])
 def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(policy, monkeypatch, autopilot, fence,
                                                                                mode, text):
@@ -130,6 +130,8 @@ def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(p
     (failsafe,) = events(report, "failsafe")
     companion = "OFFBOARD" if autopilot == "px4" else "GUIDED"
     assert failsafe.startswith(f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe (")
+    quoted = "Geofence: exceeding maximum distance to Home" if autopilot == "px4" else text  # its STATUSTEXT
+    assert failsafe.endswith(f"({quoted!r})")
     assert report["search_end"] == f"vehicle switched to {mode}" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
     assert [f["reason"] for f in report["outcome"]["vehicle_failsafes"]] == [text]
     assert report["outcome"]["outcome"] == "safe" and report["outcome"]["vehicle_end"] == "landed and disarmed"
