@@ -29,6 +29,8 @@ ARDUPILOT_ACTIONS = {0: "report only", 1: "RTL or Land", 2: "Land", 3: "SmartRTL
 ALT_MAX, CIRCLE, ALT_MIN = 1, 2, 8  # FENCE_TYPE bits
 CEILING_ROOM_M = 5.0  # the altitude hold's overshoot a ceiling must leave room for
 FLOOR_ROOM_M = 5.0
+REACHED_RADIUS_M = 5.0  # closer than this to an acting fence's radius counts as at it (fence_reached) ...
+REACHED_HEIGHT_M = 2.0  # ... and to its ceiling or floor (inside the 5 m the preflight check leaves free)
 
 
 def fence_params(autopilot: str) -> tuple[str, ...]:
@@ -78,11 +80,40 @@ def read_fence(autopilot: str, values: dict[str, float]) -> AutopilotFence:
                           ("FENCE_RADIUS", "FENCE_ALT_MAX", "FENCE_ALT_MIN"))
 
 
+def home_offset_ne(mission: Mission, vehicle_home: GeoPoint) -> tuple[float, float]:
+    """Where the vehicle's home is in the mission's frame (north, east from the mission's home, m)."""
+    north, east, _ = LocalFrame(mission.scenario.home).to_ned(vehicle_home.lat_deg, vehicle_home.lon_deg,
+                                                              vehicle_home.alt_m)
+    return north, east
+
+
+def fence_reached(autopilot: str, values: dict[str, float], north_m: float, east_m: float,
+                  height_m: float) -> str | None:
+    """Whether the drone, ``north_m``/``east_m`` from the vehicle's home at ``height_m`` above it, is at the
+    autopilot's acting fence (read from the parameter ``values``, the latest the link heard), within the distance
+    the autopilot's own check can lag (PX4 checks every 200 ms; GPS error): then a mode change there is the
+    autopilot's geofence failsafe, announced or not (its text may be lost in an outage). None: not at it."""
+    names = fence_params(autopilot)
+    if not all(name in values for name in names):
+        return None
+    fence = read_fence(autopilot, values)
+    if not fence.acts:
+        return None
+    distance = math.hypot(north_m, east_m)
+    radius_name, ceiling_name, floor_name = fence.names
+    if fence.radius_m is not None and distance >= fence.radius_m - REACHED_RADIUS_M:
+        return f"{radius_name} {fence.radius_m:g} m reached: {distance:.0f} m from home"
+    if fence.ceiling_m is not None and height_m >= fence.ceiling_m - REACHED_HEIGHT_M:
+        return f"{ceiling_name} {fence.ceiling_m:g} m reached: {height_m:.0f} m above home"
+    if fence.floor_m is not None and height_m <= fence.floor_m + REACHED_HEIGHT_M:
+        return f"{floor_name} {fence.floor_m:g} m reached: {height_m:.0f} m above home"
+    return None
+
+
 def mission_reach_m(mission: Mission, vehicle_home: GeoPoint, guard_margin_m: float) -> tuple[float, float]:
     """(how far from the vehicle's home the runner's guard lets the drone go, how far the mission's fence reaches):
     the farthest corner of the mission's geofence, drawn in by the guard's margin for the first."""
-    home_n, home_e, _ = LocalFrame(mission.scenario.home).to_ned(vehicle_home.lat_deg, vehicle_home.lon_deg,
-                                                                  vehicle_home.alt_m)
+    home_n, home_e = home_offset_ne(mission, vehicle_home)
     fence = mission.fence
 
     def farthest(inset: float) -> float:

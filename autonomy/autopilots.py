@@ -106,3 +106,24 @@ def flavour_for(autopilot: int) -> AutopilotFlavour:
     entry = mavlink.enums["MAV_AUTOPILOT"].get(autopilot)
     raise UnsupportedAutopilot(f"the vehicle's autopilot is {entry.name if entry else autopilot}: the runner flies "
                                "PX4 (MAV_AUTOPILOT_PX4) and ArduPilot Copter (MAV_AUTOPILOT_ARDUPILOTMEGA) only")
+
+
+LINK_LOSS_PARAM = {"PX4": "COM_OBL_RC_ACT", "ArduPilot Copter": "FS_GCS_ENABLE"}
+"""The parameter that sets what the autopilot's link-loss failsafe switches to."""
+LINK_LOSS_MODES = {
+    # PX4 COM_OBL_RC_ACT (failsafe.cpp fromOfflossActParam): 0 Position, which without RC cannot run and falls
+    # through Altitude and Stabilized to Hold (getSelectedAction); 3 Return, 4 Land, 5 Hold.
+    "PX4": {0: {"POSCTL", "LOITER"}, 3: {"RTL"}, 4: {"LAND"}, 5: {"LOITER"}},
+    # ArduCopter FS_GCS_ENABLE: 0 off (GUIDED only stops after GUID_TIMEOUT), 1 RTL, 2 RTL (AUTO continues), 3 SmartRTL
+    # or RTL, 4 SmartRTL or Land, 5 Land, 6 DO_LAND_START or RTL, 7 Brake or Land; RTL lands without a position.
+    "ArduPilot Copter": {0: set(), 1: {"RTL", "LAND"}, 2: {"RTL", "LAND"}, 3: {"SMART_RTL", "RTL", "LAND"},
+                         4: {"SMART_RTL", "LAND"}, 5: {"LAND"}, 6: {"RTL", "LAND"}, 7: {"BRAKE", "LAND"}},
+}
+
+
+def link_loss_modes(flavour: AutopilotFlavour, params: dict[str, float]) -> frozenset[str]:
+    """The modes this vehicle's own link-loss failsafe may switch to, from its parameters as read (all of the
+    flavour's failsafe modes while the parameter is unread or its value unknown)."""
+    value = params.get(LINK_LOSS_PARAM[flavour.name])
+    modes = LINK_LOSS_MODES[flavour.name].get(int(value)) if value is not None and math.isfinite(value) else None
+    return flavour.failsafe_modes if modes is None else flavour.failsafe_modes & frozenset(modes)

@@ -11,7 +11,8 @@ order (the first that applies wins):
 4. **policy stalled**: no decision applied for ``policy_stall_rtl_s``.
 5. **low battery**: at or below ``low_battery_pct``.
 6. **the vehicle left the companion mode** (OFFBOARD / GUIDED): the autopilot's own safety failsafe (its geofence,
-   the battery: announced) ends the search; a switch into one of its failsafe modes is held for
+   the battery: announced; or the drone at the autopilot's acting fence, ``autopilot_fence.fence_reached``) ends
+   the search; a switch into one of its failsafe modes is held for
    ``link_loss.settle_s`` first (``wait``: a safety text may come just after it); the vehicle's own link-loss
    failsafe then resumes it when
    ``autonomy.link_loss`` has the evidence and resumptions are left (``resume``); anything else is a pilot's
@@ -23,8 +24,10 @@ The runner acts on the verdict (``MissionRunner._check_failsafes``): it records 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
-from autonomy.autopilots import AutopilotFlavour
+from autonomy.autopilot_fence import fence_reached
+from autonomy.autopilots import LINK_LOSS_PARAM, AutopilotFlavour, link_loss_modes
 from autonomy.estimator import PoseEstimator
 from autonomy.link_loss import LinkLossMonitor
 from autonomy.runner_config import RunnerConfig
@@ -47,10 +50,12 @@ class Verdict:
 
 
 def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavour, link_loss: LinkLossMonitor,
-                 boot_time: BootTimeMap, last_resumed_s: float) -> Verdict | None:
+                 boot_time: BootTimeMap, last_resumed_s: float,
+                 from_home: Callable[[], tuple[float, float, float] | None] = lambda: None) -> Verdict | None:
     """The verdict on the search at ``now`` (None: carry on). ``link`` is the vehicle link (pymavlink or MAVSDK);
     ``last_resumed_s`` is when the search last had news of its policy (its last decision, the last transition, the
-    link coming back)."""
+    link coming back); ``from_home()`` where the drone is from the vehicle's home (north, east, height; m), asked
+    only when the vehicle left the companion mode."""
     last, waiting = link.last_vehicle_message_s, config.link_loss
     silent_s = now - last if last is not None else 0.0
     if silent_s > config.telemetry_timeout_s:
@@ -70,7 +75,12 @@ def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavo
     if battery is not None and battery <= config.low_battery_pct:
         return Verdict("end", f"battery at {battery:g} %: RTL", "low battery")
     if mode != companion:
+        params = getattr(link, "params", {})
+        link_loss.modes = link_loss_modes(flavour, params)
         safety = link_loss.safety_failsafe(now)
+        where = from_home() if safety is None else None
+        if where is not None:  # at the autopilot's fence: its failsafe, announced or not
+            safety = fence_reached(flavour.name, params, *where)
         if safety is not None:
             link_loss.left_companion_s = None
             return Verdict("end", f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe "
@@ -83,6 +93,9 @@ def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavo
         if evidence is not None and link_loss.may_resume():
             return Verdict("resume", "", mode=mode, evidence=evidence)
         used_up = f"; {evidence}, but no resumption is left" if evidence is not None else ""
+        if mode in flavour.failsafe_modes and mode not in link_loss.modes:
+            name = LINK_LOSS_PARAM[flavour.name]
+            used_up = f"; not its link-loss failsafe ({name} {params[name]:g} does not switch to {mode})"
         return Verdict("end", f"the vehicle left {companion} (now {mode}){used_up}", f"vehicle switched to {mode}")
     # In the companion mode (again: PX4 returns to OFFBOARD by itself once setpoints flow again): carry on.
     link_loss.left_companion_s = None

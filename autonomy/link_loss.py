@@ -86,6 +86,9 @@ class LinkLossMonitor:
         self.announcements: list[tuple[float, str]] = []
         self.safety_announcements: list[tuple[float, str]] = []
         self.resumptions = 0
+        self.modes = flavour.failsafe_modes
+        """The modes this vehicle's link-loss failsafe may switch to (autopilots.link_loss_modes, from its
+        parameters; the judge keeps it current)."""
         self.left_companion_s: float | None = None
         """When the runner saw the vehicle leave the companion mode, while that switch is being settled."""
 
@@ -136,7 +139,7 @@ class LinkLossMonitor:
     def failsafe_evidence(self, now_s: float, mode: str | None) -> str | None:
         """Why a switch to ``mode`` seen at ``now_s`` is the vehicle's own link-loss failsafe, in words; None when
         nothing says so (then it is a pilot's mode change) or a safety announcement explains it."""
-        if mode not in self.flavour.failsafe_modes or self.safety_failsafe(now_s) is not None:
+        if mode not in self.modes or self.safety_failsafe(now_s) is not None:
             return None
         since = now_s - self.config.evidence_window_s
         texts = [text for time_s, text in self.announcements if time_s >= since]
@@ -155,7 +158,7 @@ class LinkLossMonitor:
         """Whether a switch to ``mode`` (a failsafe mode, a resumption left) is still within ``settle_s`` of when
         it was first seen; the first call starts the clock. The caller clears ``left_companion_s`` when it
         judges the switch."""
-        if mode not in self.flavour.failsafe_modes or not self.may_resume():
+        if mode not in self.modes or not self.may_resume():
             return False
         if self.left_companion_s is None:
             self.left_companion_s = now_s

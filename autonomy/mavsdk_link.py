@@ -190,11 +190,11 @@ class MavsdkLink:
     def request_message(self, message_id: int) -> None:
         """MAVSDK requests what its subscriptions need (the home position among them) itself."""
 
-    def request_params(self, names: tuple[str, ...]) -> None:
-        """Each of ``names`` not read yet, through MAVSDK's Param plugin (which knows each autopilot's encoding);
-        the answers land in :attr:`params`."""
+    def request_params(self, names: tuple[str, ...], again: bool = False) -> None:
+        """Each of ``names`` not read yet (``again``: all of them), through MAVSDK's Param plugin (which knows each
+        autopilot's encoding); the answers land in :attr:`params`."""
         for name in names:
-            if name not in self.params:
+            if again or name not in self.params:
                 self._call(self._read_param(name))
 
     async def _read_param(self, name: str) -> None:

@@ -25,12 +25,13 @@ Every transition and failsafe is recorded with its reason.
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from autonomy.autopilot_fence import fence_params, judge_autopilot_fence
-from autonomy.autopilots import PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
+from autonomy.autopilot_fence import fence_params, home_offset_ne, judge_autopilot_fence
+from autonomy.autopilots import LINK_LOSS_PARAM, PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
 from autonomy.estimator import PoseEstimator
 from autonomy.failsafes import blind_reason, judge_search
@@ -78,6 +79,7 @@ class MissionRunner:
         self._link_back_s = -math.inf  # when telemetry last came back after a silence (decisions restart then)
         self._waiting_reported: str | None = None  # what the runner last said it waits for
         self._positions_seen_s: float | None = None
+        self._track: deque = deque(maxlen=1024)  # (time, north, east) of recent position fixes, mission frame
         self.state: str | None = None
         self.transitions: list[dict] = []
         self.events: list[dict] = []
@@ -110,6 +112,7 @@ class MissionRunner:
         now = self.clock.now()
         if any(msg.get_type() == "GLOBAL_POSITION_INT" for msg in messages):
             self._positions_seen_s = now
+            self._track.append((now, *self.estimator.predict_to(now).position_ned[:2]))
         texts = self.link.status_since(self._texts_seen)
         self._texts_seen = self.link.status_count
         was_down = self.link_loss.link_down()
@@ -119,6 +122,10 @@ class MissionRunner:
         if was_down and not self.link_loss.link_down():
             self._link_back_s = now
         self.streamer.tick(now)
+
+    def _judged_params(self) -> tuple[str, ...]:
+        """The parameters the runner judges by: the autopilot's fence and what its link-loss failsafe does."""
+        return (*fence_params(self.flavour.name), LINK_LOSS_PARAM[self.flavour.name])
 
     def _probe_sender(self) -> Callable[[int], None] | None:
         """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; not the MAVSDK backend)."""
@@ -189,7 +196,7 @@ class MissionRunner:
         except UnsupportedAutopilot as exc:
             raise MissionAborted(str(exc)) from None
         self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour, self._probe_sender())
-        self.link.request_params(fence_params(self.flavour.name))  # read while the pose estimate converges
+        self.link.request_params(self._judged_params())  # read while the pose estimate converges
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
 
     def _ask_for_telemetry(self) -> None:
@@ -330,11 +337,14 @@ class MissionRunner:
         settle = self.link_loss.left_companion_s  # decisions pause while a mode change settles: not a stall
         resumed_s = max(self._last_decision_s, self.transitions[-1]["time_s"], self._link_back_s,
                         -math.inf if settle is None else settle)
-        verdict = judge_search(now, self.link, self.config, self.flavour, self.link_loss, self.boot_time, resumed_s)
+        verdict = judge_search(now, self.link, self.config, self.flavour, self.link_loss, self.boot_time, resumed_s,
+                               lambda: self._from_home(now))
         if verdict is not None and verdict.action == "wait":
             if self._waiting_reported != (verdict.mode or ""):  # each wait said once
                 self._waiting_reported = verdict.mode or ""
                 self._event("link", verdict.message)
+                if verdict.mode:  # settling a mode change: the parameters may have changed while the link was down
+                    self.link.request_params(self._judged_params(), again=True)
             return
         self._waiting_reported = None
         if verdict is None:
@@ -390,6 +400,21 @@ class MissionRunner:
         origin = self.estimator.origin
         offset_m = home_amsl - origin.alt_m if home_amsl is not None and origin is not None else 0.0
         return -float(self.estimator.position_ned[2]) - offset_m
+
+    def _from_home(self, now: float) -> tuple[float, float, float] | None:
+        """The farthest the drone was from the vehicle's home within the link-loss evidence window (its position
+        fixes, and now): north, east and the height now (m); None before home is known. An autopilot's fence may
+        have sent it back (RTL) while the link was down."""
+        home = self.link.home_position()
+        if home is None or self.estimator.time_s is None:
+            return None
+        home_north, home_east = home_offset_ne(self.mission, home)
+        since = now - self.config.link_loss.evidence_window_s
+        fixes = [(n - home_north, e - home_east) for t, n, e in self._track if t >= since]
+        north, east = self.estimator.predict_to(now).position_ned[:2]
+        fixes.append((north - home_north, east - home_east))
+        far_north, far_east = max(fixes, key=lambda fix: math.hypot(*fix))
+        return float(far_north), float(far_east), self._height_m()
 
     def _altitude_hold(self) -> float:
         """Vertical velocity (NED, down positive) towards the target height above the vehicle's home."""

@@ -319,11 +319,12 @@ class VehicleLink:
         padded = tuple(params) + (0.0,) * (7 - len(params))
         self._mav.command_long_send(*self._target(), command, confirmation, *padded)
 
-    def request_params(self, names: tuple[str, ...]) -> None:
-        """PARAM_REQUEST_READ for each of ``names`` not read yet; the answers land in :attr:`params`."""
+    def request_params(self, names: tuple[str, ...], again: bool = False) -> None:
+        """PARAM_REQUEST_READ for each of ``names`` not read yet (``again``: all of them); the answers land in
+        :attr:`params`, as do the PARAM_VALUEs the vehicle sends when one of them changes."""
         self._params_wanted.update(names)
         for name in names:
-            if name not in self.params:
+            if again or name not in self.params:
                 self._mav.param_request_read_send(*self._target(), name.encode(), -1)
 
     def _param_number(self, msg) -> float:

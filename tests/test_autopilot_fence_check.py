@@ -85,3 +85,26 @@ def test_without_answers_the_fence_is_not_checked_and_the_flight_goes_on(policy,
     assert events(report, "autopilot-fence") == ["not checked (reading the autopilot's fence parameters: not "
                                                  "within 5 s)"]
     assert report["outcome"]["outcome"] == "completed"
+
+
+def test_fence_reached_names_the_limit_the_drone_is_at_and_only_for_a_fence_that_acts():
+    from autonomy.autopilot_fence import fence_reached
+    px4 = {"GF_ACTION": 2, "GF_MAX_HOR_DIST": 300.0, "GF_MAX_VER_DIST": 120.0}
+    assert fence_reached("PX4", px4, 190.0, 230.0, 50.0) == "GF_MAX_HOR_DIST 300 m reached: 298 m from home"
+    assert fence_reached("PX4", px4, 180.0, 220.0, 50.0) is None  # 284 m: more than 5 m inside
+    assert fence_reached("PX4", px4, 0.0, 0.0, 118.5) == "GF_MAX_VER_DIST 120 m reached: 118 m above home"
+    assert fence_reached("PX4", {**px4, "GF_ACTION": 1}, 190.0, 230.0, 50.0) is None  # warns only
+    assert fence_reached("PX4", {"GF_ACTION": 2}, 190.0, 230.0, 50.0) is None  # not read yet
+    copter = {"FENCE_ENABLE": 1, "FENCE_TYPE": 15, "FENCE_ACTION": 1, "FENCE_RADIUS": 300.0, "FENCE_ALT_MAX": 100.0,
+              "FENCE_ALT_MIN": 10.0}
+    assert fence_reached("ArduPilot Copter", copter, 0.0, 10.0, 11.5) == "FENCE_ALT_MIN 10 m reached: 12 m above home"
+    assert fence_reached("ArduPilot Copter", {**copter, "FENCE_ENABLE": 0}, 0.0, 299.0, 11.5) is None
+
+
+def test_the_link_loss_modes_follow_the_autopilots_failsafe_parameter():
+    from autonomy.autopilots import ARDUPILOT_COPTER, PX4, link_loss_modes
+    assert link_loss_modes(PX4, {}) == PX4.failsafe_modes  # not read: any failsafe mode
+    assert link_loss_modes(PX4, {"COM_OBL_RC_ACT": 0.0}) == {"POSCTL", "LOITER"}  # Position, or Hold without RC
+    assert link_loss_modes(PX4, {"COM_OBL_RC_ACT": 4.0}) == {"LAND"}
+    assert link_loss_modes(ARDUPILOT_COPTER, {"FS_GCS_ENABLE": 0.0}) == frozenset()  # GUIDED just stops
+    assert link_loss_modes(ARDUPILOT_COPTER, {"FS_GCS_ENABLE": 7.0}) == {"BRAKE", "LAND"}

@@ -193,3 +193,35 @@ def test_the_runner_flies_with_each_autopilots_default_telemetry_rates(policy, a
         assert rate_hz == pytest.approx(expected, rel=0.1)
     else:
         assert rate_hz >= 4.0  # streams were requested: without, ArduPilot sends no positions at all
+
+
+AT_THE_FENCE = "the autopilot's own failsafe ('{} 150 m reached: 1"
+
+
+@pytest.mark.parametrize("autopilot, fence, outage, mode, why", [
+    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "outage=35.5:3.5", "LOITER", ": " + AT_THE_FENCE.format("GF_MAX_HOR_DIST")),
+    ("ardupilot", {"FS_GCS_ENABLE": 1, "FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "outage=30.1:3.5", "RTL",
+     ": " + AT_THE_FENCE.format("FENCE_RADIUS")),
+    ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "outage=29.5:3.5", "RTL",
+     "; not its link-loss failsafe (FS_GCS_ENABLE 0 does not switch to RTL)")])
+def test_a_geofence_failsafe_whose_text_was_lost_in_an_outage_is_still_not_resumed_over(
+        policy, monkeypatch, autopilot, fence, outage, mode, why):
+    """As above, but a two-way outage swallows the breach's STATUSTEXT (and, from 29.5 s, the PARAM_VALUE of the new
+    fence): the silence reads as link-loss evidence. The runner reads the parameters again while it settles the
+    switch and ends the search: the drone was at the autopilot's fence, or (ArduPilot's default FS_GCS_ENABLE 0) the
+    vehicle's link-loss failsafe does not switch modes at all."""
+    name = list(fence)[-1]
+    params = {**fence, name: 0.0} if autopilot == "px4" else {**fence, name: 1000.0}
+    tighten = (lambda gcs: gcs.param_set_encode(1, 1, name.encode(), fence[name], mavlink.MAV_PARAM_TYPE_REAL32))
+    faulty = replay_module.apply_faults
+    monkeypatch.setattr(replay_module, "apply_faults", lambda links, faults, clock, seed: [
+        PilotAtTheGroundStation(faulty(links, faults, clock, seed)[0], clock, 30.0, tighten)])
+    report = fly(outbound(policy), autopilot, faults=outage, params=params)
+    assert report["link_packets"] == {"pilot_commands": 1}
+    assert "no telemetry for 1 s: holding position" in events(report, "link")  # the outage
+    assert events(report, "resume") == [] and report["resumptions"] == 0
+    (failsafe,) = events(report, "failsafe")
+    companion = "OFFBOARD" if autopilot == "px4" else "GUIDED"
+    assert failsafe.startswith(f"the vehicle left {companion} (now {mode}){why}"), failsafe
+    assert report["search_end"] == f"vehicle switched to {mode}" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
+    assert report["outcome"]["outcome"] == "safe" and report["outcome"]["vehicle_end"] == "landed and disarmed"
