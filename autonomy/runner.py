@@ -339,6 +339,8 @@ class MissionRunner:
                         -math.inf if settle is None else settle)
         verdict = judge_search(now, self.link, self.config, self.flavour, self.link_loss, self.boot_time, resumed_s,
                                lambda: self._from_home(now))
+        if settle is not None and self.link_loss.left_companion_s is None and verdict is None:
+            self._event("link", f"the vehicle is back in {self.flavour.companion_mode} by itself: searching on")
         if verdict is not None and verdict.action == "wait":
             if self._waiting_reported != (verdict.mode or ""):  # each wait said once
                 self._waiting_reported = verdict.mode or ""

@@ -8,8 +8,8 @@ is disarmed or has held position for a while, so the outcome includes what the a
 Outcomes:
 
 * ``completed``: the runner went through its states to "landed and disarmed" with no failsafe and no abort, and
-  the vehicle raised no failsafe of its own that the runner did not resume the search from (a link-loss failsafe
-  followed by a resumption, autonomy.link_loss, is part of a completed search).
+  the vehicle raised no failsafe of its own that the search did not resume from (a link-loss failsafe followed by
+  a resumption, autonomy.link_loss, or by PX4's own return to OFFBOARD, is part of a completed search).
 * ``safe``: something went wrong (a runner failsafe or abort, a vehicle failsafe) but the vehicle ended landed and
   disarmed, returning (RTL), landing, or holding position (PX4 HOLD or POSCTL, ArduPilot LOITER or BRAKE, or
   GUIDED stopped by its GUID_TIMEOUT); ``reason`` says what went wrong first.
@@ -43,6 +43,8 @@ FAILSAFE_TEXT = re.compile(r"^(Failsafe: |GCS Failsafe(?! Cleared)|Battery Fails
 """The vehicle's own failsafes in its log: the PX4 personality's "Failsafe: <cause>, switching to <mode>" (its log
 line; over MAVLink PX4 says only "Failsafe activated"), ArduPilot's "GCS Failsafe", "Battery Failsafe" (not the
 "GCS Failsafe Cleared" that ends one) and "Circle fence breached"."""
+FALLBACK_CLEARED = "Offboard setpoints back"
+"""The PX4 personality's log line when its offboard-loss fallback clears (sitl_bridge.autopilot)."""
 STOPPED_MPS = 0.5
 
 
@@ -88,6 +90,7 @@ class FlightWatch:
         self.max_fence_excursion_m = 0.0
         self.longest_offboard_gap_s = 0.0
         self.vehicle_failsafes: list[dict] = []
+        self.fallbacks_cleared: list[float] = []  # PX4 back in OFFBOARD by itself after an offboard-loss fallback
         self.flyaway: str | None = None
         self.ditched: str | None = None
         self.settled_s = 0.0
@@ -97,6 +100,8 @@ class FlightWatch:
         """The vehicle's event hook: keep its failsafes (their text names the trigger and the action)."""
         if FAILSAFE_TEXT.match(event.text):
             self.vehicle_failsafes.append({"time_s": round(event.time_s, 3), "reason": event.text})
+        elif event.text.startswith(FALLBACK_CLEARED):
+            self.fallbacks_cleared.append(event.time_s)
 
     def _setpoint_gap_s(self) -> float:
         """How long the vehicle has flown its companion's setpoints without a new one (0 when not guided), counted
@@ -165,9 +170,11 @@ class FlightWatch:
         return f"flying in {status.mode_name} at {-state.down_m:.0f} m"
 
     def unresumed_failsafes(self, report: dict) -> list[dict]:
-        """The vehicle's failsafes after which the runner did not resume the search (each resumption answers the
-        latest failsafe before it): a link-loss failsafe the search came back from does not spoil a completion."""
-        resumptions = [e["time_s"] for e in report["events"] if e["event"] == "resume"]
+        """The vehicle's failsafes after which the search did not resume (each resumption, the runner's or PX4's own
+        return to OFFBOARD, answers the latest failsafe before it): a link-loss failsafe the search came back from
+        does not spoil a completion."""
+        resumptions = sorted([e["time_s"] for e in report["events"] if e["event"] == "resume"]
+                             + self.fallbacks_cleared)
         left = []
         for failsafe in self.vehicle_failsafes:
             answer = next((t for t in resumptions if t >= failsafe["time_s"]), None)

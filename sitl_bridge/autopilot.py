@@ -73,6 +73,9 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
         self.ground_since_s: float | None = None
         self.battery_failsafe = ""
         self._last_reject_print_s = -math.inf
+        # In the offboard-loss fallback: the user's intended mode is still OFFBOARD (Failsafe::checkModeFallback
+        # leaves it), so once setpoints flow again the fallback clears and the vehicle is back in OFFBOARD.
+        self.offboard_fallback = False
 
     # ----------------------------------------------------------------- what the vehicle reports
     def offboard_signal_lost(self, now: float) -> bool:
@@ -134,6 +137,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
                 self._last_reject_print_s = now
                 self._event(now, "Switching to Offboard is currently not available", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
+        self.offboard_fallback = False  # any switch but the fallback's own ends it (the caller sets it after)
         if mode is self.mode:
             return ACCEPTED
         self.mode = mode
@@ -174,7 +178,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
         if not state.on_ground and not force:
             self._event(now, "Disarming denied: not landed", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
-        self.armed, self.state_changed = False, True
+        self.armed, self.state_changed, self.offboard_fallback = False, True, False
         self._event(now, f"Disarmed ({reason})")
         if self.mode is not FlightMode.HOLD and state.on_ground:
             self.set_mode(FlightMode.HOLD, now, state, "disarmed on the ground")
@@ -394,6 +398,10 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             action = FAILSAFE_MODES.get(int(self.params["COM_OBL_RC_ACT"]), FlightMode.HOLD)
             why = f"offboard setpoints lost for {now - last:.1f} s" if self.gps_ok else "no position estimate"
             self._failsafe(now, state, action, why)
+            self.offboard_fallback = True
+        elif self.offboard_fallback and not self.offboard_signal_lost(now):
+            self._event(now, "Offboard setpoints back: the offboard-loss fallback cleared", broadcast=False)
+            self.set_mode(FlightMode.OFFBOARD, now, state, "offboard fallback cleared")
         self._check_geofence(now, state)
         if state.on_ground:
             return
