@@ -114,8 +114,9 @@ LINK_LOSS_MODES = {
     # PX4 COM_OBL_RC_ACT (failsafe.cpp fromOfflossActParam): 0 Position, which without RC cannot run and falls
     # through Altitude and Stabilized to Hold (getSelectedAction); 3 Return, 4 Land, 5 Hold.
     "PX4": {0: {"POSCTL", "LOITER"}, 3: {"RTL"}, 4: {"LAND"}, 5: {"LOITER"}},
-    # ArduCopter FS_GCS_ENABLE: 0 off (GUIDED only stops after GUID_TIMEOUT), 1 RTL, 2 RTL (AUTO continues), 3 SmartRTL
-    # or RTL, 4 SmartRTL or Land, 5 Land, 6 DO_LAND_START or RTL, 7 Brake or Land; RTL lands without a position.
+    # ArduCopter FS_GCS_ENABLE (Parameters.cpp @Values): 0 no action (GUIDED only stops after GUID_TIMEOUT), 1 RTL,
+    # 2 RTL (AUTO continues), 3 SmartRTL or RTL, 4 SmartRTL or Land, 5 Land, 6 Auto DO_LAND_START or RTL, 7 Brake or
+    # Land. LAND is kept for each: the fallback when the first choice cannot run.
     "ArduPilot Copter": {0: set(), 1: {"RTL", "LAND"}, 2: {"RTL", "LAND"}, 3: {"SMART_RTL", "RTL", "LAND"},
                          4: {"SMART_RTL", "LAND"}, 5: {"LAND"}, 6: {"RTL", "LAND"}, 7: {"BRAKE", "LAND"}},
 }

@@ -112,7 +112,9 @@ class MissionRunner:
         now = self.clock.now()
         if any(msg.get_type() == "GLOBAL_POSITION_INT" for msg in messages):
             self._positions_seen_s = now
-            self._track.append((now, *self.estimator.predict_to(now).position_ned[:2]))
+            if self.estimator.time_s is not None:  # the fix just fused: no prediction needed
+                north, east = self.estimator.position_ned[:2]
+                self._track.append((now, float(north), float(east)))
         texts = self.link.status_since(self._texts_seen)
         self._texts_seen = self.link.status_count
         was_down = self.link_loss.link_down()

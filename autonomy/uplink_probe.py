@@ -81,7 +81,10 @@ class UplinkProbe:
     def unanswered_since(self, now_s: float) -> float | None:
         """When the oldest request still unanswered was sent, if the requests unanswered past the reply timeout
         span at least ``min_stretch_s``; None while the vehicle answers."""
-        overdue = [sent for _, sent in self._pending if now_s - sent > self.config.reply_timeout_s]
-        if overdue and overdue[-1] - overdue[0] >= self.config.min_stretch_s - 1e-9:
-            return overdue[0]
-        return None
+        timeout = self.config.reply_timeout_s
+        if not self._pending or now_s - self._pending[0][1] <= timeout:
+            return None
+        # requests go out in time order: the overdue ones are a prefix, and only the newest few are not overdue
+        first = self._pending[0][1]
+        last = next(sent for _, sent in reversed(self._pending) if now_s - sent > timeout)
+        return first if last - first >= self.config.min_stretch_s - 1e-9 else None
