@@ -84,9 +84,11 @@ PX4 = AutopilotFlavour(
     # PX4 >= 1.14 says "Failsafe activated" whatever the cause (FailsafeBase::notifyUser; the cause goes out as an
     # event), so no STATUSTEXT announces the offboard-loss failsafe: silences and deaf stretches are the evidence.
     # Its health checks' texts do name the geofence ("Geofence: exceeding maximum distance to Home") and the
-    # battery ("Critical battery", "Emergency battery level"): docs/runner.md.
+    # battery ("Critical battery", "Emergency battery level"): docs/runner.md. "Failsafe activated, entering Hold
+    # for N seconds" comes only before a Return or Land whose takeover setting is "auto" (COM_FAIL_ACT_T; the
+    # geofence's, the battery's), never before the offboard-loss fallback: resuming in that Hold would cancel it.
     failsafe_text=None,
-    safety_text=re.compile(r"geofence|battery|estimator|navigation failure"),
+    safety_text=re.compile(r"geofence|battery|entering hold for|estimator|navigation failure"),
     takeoff_altitude_amsl=True, setpoint_timeout_s=None)
 
 ARDUPILOT_COPTER = AutopilotFlavour(

@@ -19,6 +19,7 @@ from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.fences import Px4Geofence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
+from sitl_bridge.px4_failsafes import NONE, Px4Failsafes
 from sitl_bridge.px4_modes import FlightMode, base_mode
 from sitl_bridge.px4_offboard import OffboardSetpoints
 from sitl_bridge.px4_orbit import Orbit
@@ -47,7 +48,7 @@ PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", Flig
                  FlightMode.LAND: "landing"}
 
 
-class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
+class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
@@ -71,7 +72,6 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
         self.armed_at_s = 0.0
         self.has_flown = False
         self.ground_since_s: float | None = None
-        self.battery_failsafe = ""
         self._last_reject_print_s = -math.inf
         # In the offboard-loss fallback: the user's intended mode is still OFFBOARD (Failsafe::checkModeFallback
         # leaves it), so once setpoints flow again the fallback clears and the vehicle is back in OFFBOARD.
@@ -88,13 +88,6 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
     def heartbeat_fields(self) -> tuple[int, int, int, int]:
         status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
         return self.MAV_AUTOPILOT, base_mode(self.mode, self.armed), self.mode.custom_mode, status
-
-    def battery_charge_state(self, fraction: float) -> int:
-        if fraction <= self.params["BAT_EMERGEN_THR"]:
-            return mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
-        if fraction <= self.params["BAT_CRIT_THR"]:
-            return mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
-        return mavlink.MAV_BATTERY_CHARGE_STATE_OK
 
     @property
     def status(self) -> FlightStatus:
@@ -138,6 +131,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
                 self._event(now, "Switching to Offboard is currently not available", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         self.offboard_fallback = False  # any switch but the fallback's own ends it (the caller sets it after)
+        self._forget_failsafe_actions()  # ... and is a user takeover of a failsafe's action (the same rule)
         if mode is self.mode:
             return ACCEPTED
         self.mode = mode
@@ -166,7 +160,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             return TEMPORARILY_REJECTED
         self.armed, self.state_changed = True, True
         self.armed_at_s, self.has_flown, self.ground_since_s = now, False, None
-        self.battery_failsafe = ""
+        self.battery_warning = NONE
+        self._forget_failsafe_actions()
         if self.mode in (FlightMode.HOLD, FlightMode.POSCTL):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
         self._event(now, "Armed" + (" (forced)" if force else ""))
@@ -179,6 +174,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             self._event(now, "Disarming denied: not landed", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         self.armed, self.state_changed, self.offboard_fallback = False, True, False
+        self._forget_failsafe_actions()
         self._event(now, f"Disarmed ({reason})")
         if self.mode is not FlightMode.HOLD and state.on_ground:
             self.set_mode(FlightMode.HOLD, now, state, "disarmed on the ground")
@@ -393,35 +389,16 @@ class Autopilot(OffboardSetpoints, Px4Geofence, AutopilotBase):
             self.disarm(now, state, force=False, reason=f"auto-disarm: {why}")
 
     def _check_failsafes(self, now: float, state: VehicleState) -> None:
+        self._run_delayed_failsafe(now, state)
         if self.mode is FlightMode.OFFBOARD and self.offboard_signal_lost(now):
             last = self.setpoint.time_s if self.setpoint else -math.inf
             action = FAILSAFE_MODES.get(int(self.params["COM_OBL_RC_ACT"]), FlightMode.HOLD)
             why = f"offboard setpoints lost for {now - last:.1f} s" if self.gps_ok else "no position estimate"
-            self._failsafe(now, state, action, why)
+            self._failsafe(now, state, action, why)  # a mode fallback: never delayed (takeover "Always")
             self.offboard_fallback = True
         elif self.offboard_fallback and not self.offboard_signal_lost(now):
             self._event(now, "Offboard setpoints back: the offboard-loss fallback cleared", broadcast=False)
             self.set_mode(FlightMode.OFFBOARD, now, state, "offboard fallback cleared")
         self._check_geofence(now, state)
-        if state.on_ground:
-            return
-        fraction = state.battery_wh / self.airframe.battery_capacity_wh
-        if fraction <= self.params["BAT_EMERGEN_THR"] and self.battery_failsafe != "emergency":
-            self.battery_failsafe = "emergency"
-            self._event(now, "Emergency battery level\t", mavlink.MAV_SEVERITY_EMERGENCY)  # batteryCheck.cpp
-            self._failsafe(now, state, FlightMode.LAND, f"battery {fraction:.0%}")
-        elif fraction <= self.params["BAT_CRIT_THR"] and not self.battery_failsafe:
-            self.battery_failsafe = "critical"
-            self._event(now, "Critical battery\t", mavlink.MAV_SEVERITY_EMERGENCY)
-            self._failsafe(now, state, FlightMode.RTL, f"battery {fraction:.0%}")
-
-    def _failsafe(self, now: float, state: VehicleState, action: FlightMode | None, why: str) -> None:
-        """Commander's failsafe reaction: switch to ``action`` (None: warn only). What PX4 >= 1.14 tells a ground
-        station in text is only "Failsafe activated" (``FailsafeBase::notifyUser``: the cause and the action go out
-        as events, which MAVLink STATUSTEXT readers do not see; the tab marks a text an event also carries). The
-        cause and the action are kept in the vehicle's own log."""
-        self._event(now, "Failsafe activated\t", mavlink.MAV_SEVERITY_CRITICAL)
-        self._event(now, f"Failsafe: {why}, " + (f"switching to {action.name}" if action else "warning only"),
-                    mavlink.MAV_SEVERITY_CRITICAL, broadcast=False)
-        if action is not None:
-            self.set_mode(action, now, state, "failsafe")
+        if not state.on_ground:
+            self._check_battery(now, state)

@@ -63,7 +63,7 @@ class Px4Geofence:
         if violations and not self.geofence_breached:
             for text in violations:
                 self._event(now, text, mavlink.MAV_SEVERITY_CRITICAL)
-            self._failsafe(now, state, PX4_ACTIONS.get(action), "geofence breached")
+            self._failsafe(now, state, PX4_ACTIONS.get(action), "geofence breached", delayable=True)
         self.geofence_breached = bool(violations)
 
 

@@ -519,7 +519,8 @@ def test_mission_replay_with_link_faults_prints_and_records_the_outcome(policy, 
 @pytest.mark.parametrize("flavour, link_loss_text, safety_texts", [
     (PX4, None,  # PX4 names no cause in STATUSTEXT ("Failsafe activated"); its health checks' texts name these:
      ["Geofence: exceeding maximum distance to Home", "Geofence: exceeding maximum altitude above Home",
-      "Critical battery\t", "Emergency battery level\t"]),
+      "Low battery\t", "Critical battery\t", "Emergency battery level\t",
+      "Failsafe activated, entering Hold for 5 seconds\t"]),  # only before a geofence or battery Return / Land
     (ARDUPILOT_COPTER, "GCS Failsafe", ["Circle fence breached", "Battery Failsafe", "EKF Failsafe"])])
 def test_only_link_loss_is_resumed_from_never_the_autopilots_safety_failsafes(flavour, link_loss_text, safety_texts):
     """Any STATUSTEXT with "failsafe" in it used to count as link-loss evidence: a geofence or battery RTL would

@@ -109,11 +109,16 @@ def outbound(policy: Policy) -> Policy:
         _select_goal=lambda meta_obs: torch.full((meta_obs.shape[0],), TRACK_OBJECT, dtype=torch.int64))
 
 
-@pytest.mark.parametrize("autopilot, fence, mode, text", [
-    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "LOITER", "Failsafe: geofence breached, switching to HOLD"),  # its log
-    ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "RTL", "Circle fence breached")])
+@pytest.mark.parametrize("autopilot, fence, mode, quoted, text", [
+    # the STATUSTEXT the runner quotes (the last safety text), then the vehicle's log line of its failsafe
+    ("px4", {"GF_MAX_HOR_DIST": 150.0}, "LOITER", "Geofence: exceeding maximum distance to Home",
+     "Failsafe: geofence breached, switching to HOLD"),
+    # GF_ACTION 3 (Return) holds COM_FAIL_ACT_T first: the runner's RTL in that Hold takes over, nothing else comes
+    ("px4", {"GF_ACTION": 3, "GF_MAX_HOR_DIST": 150.0}, "LOITER", "Failsafe activated, entering Hold for 5 seconds\t",
+     "Failsafe: geofence breached, holding 5 s before RTL"),
+    ("ardupilot", {"FENCE_ENABLE": 1, "FENCE_RADIUS": 150.0}, "RTL", "Circle fence breached", "Circle fence breached")])
 def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(policy, monkeypatch, autopilot, fence,
-                                                                               mode, text):
+                                                                               mode, quoted, text):
     """The ground station tightens the autopilot's fence to 150 m during the search (the runner's preflight would
     refuse such a fence), inside the mission's area, so the runner's guard does not act first. The runner must not
     take the vehicle back into OFFBOARD / GUIDED as it does after a link-loss failsafe (it did: any STATUSTEXT with
@@ -130,7 +135,6 @@ def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(p
     (failsafe,) = events(report, "failsafe")
     companion = "OFFBOARD" if autopilot == "px4" else "GUIDED"
     assert failsafe.startswith(f"the vehicle left {companion} (now {mode}): the autopilot's own failsafe (")
-    quoted = "Geofence: exceeding maximum distance to Home" if autopilot == "px4" else text  # its STATUSTEXT
     assert failsafe.endswith(f"({quoted!r})")
     assert report["search_end"] == f"vehicle switched to {mode}" and states(report)[-3:] == ["RTL", "LAND", "DONE"]
     assert [f["reason"] for f in report["outcome"]["vehicle_failsafes"]] == [text]
