@@ -224,11 +224,12 @@ class VehicleLink:
         """The texts a STATUSTEXT completes (none while a chunked one goes on). MAVLink: id 0 is a text of one
         message; chunks of a longer one share an id, and the chunk shorter than the 50-byte field is the last.
         PX4 gives every text an id and sends nothing after a full last chunk (STATUSTEXT.hpp), so a text waiting
-        for more is also complete when another id starts (and then comes before it)."""
+        for more is also complete when another id starts (and then comes before it). PX4's ids count from 0 per
+        link (``_id++``, wrapping at 65536), so from PX4 an id of 0 is chunked like any other."""
         text_id = getattr(msg, "id", 0) or 0
         parts = self._statustext_parts
         done = [parts["text"]] if parts and parts["id"] != text_id else []
-        if not text_id:
+        if not text_id and self.autopilot != mavlink.MAV_AUTOPILOT_PX4:
             self._statustext_parts = {}
             return done + [msg.text]
         if parts.get("id") != text_id:

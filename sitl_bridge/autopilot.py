@@ -19,7 +19,8 @@ from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.fences import Px4Geofence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
-from sitl_bridge.px4_failsafes import NONE, Px4Failsafes
+from sitl_bridge.px4_failsafes import (
+    BATTERY_TEXTS, CRITICAL, EMERGENCY, NONE, Px4Failsafes, battery_warning_level)
 from sitl_bridge.px4_modes import FlightMode, base_mode
 from sitl_bridge.px4_offboard import OffboardSetpoints
 from sitl_bridge.px4_orbit import Orbit
@@ -42,6 +43,7 @@ INT32_MAX = 2**31 - 1  # COMMAND_INT x and y both INT32_MAX: no position given (
 NAN_AS_INT = 0x7FF80000  # ... both this: a NaN sent as an int by mistake, DENIED
 REPOSITION_CHANGE_MODE = 1  # MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, the only flag PX4 supports
 
+BATTERY_FAILURES = {CRITICAL: "battery below BAT_CRIT_THR", EMERGENCY: "battery below BAT_EMERGEN_THR"}
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
                  FlightMode.ORBIT: "holding", FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning",
@@ -113,8 +115,9 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         """Why arming is refused, or None when the pre-arm checks pass."""
         if not self.gps_ok:
             return "no GPS fix"
-        if state.battery_wh / self.airframe.battery_capacity_wh <= self.params["BAT_CRIT_THR"]:
-            return "battery below BAT_CRIT_THR"
+        level = battery_warning_level(self.battery_fraction(state), self.params)
+        if level in BATTERY_FAILURES:  # batteryCheck.cpp: critical or worse affects every mode
+            return BATTERY_FAILURES[level]
         return next(iter(self.geofence_violations(state)), None)
 
     # ----------------------------------------------------------------- modes and arming
@@ -156,7 +159,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             return ACCEPTED
         failure = None if force else self.prearm_failure(state)
         if failure:
-            self._event(now, f"Arming denied: {failure}", mavlink.MAV_SEVERITY_CRITICAL)
+            self._refuse_arming(now, state, failure)
             return TEMPORARILY_REJECTED
         self.armed, self.state_changed = True, True
         self.armed_at_s, self.has_flown, self.ground_since_s = now, False, None
@@ -164,8 +167,21 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         self._forget_failsafe_actions()
         if self.mode in (FlightMode.HOLD, FlightMode.POSCTL):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
-        self._event(now, "Armed" + (" (forced)" if force else ""))
+        self._event(now, "Armed by external command\t")  # Commander::arm; forced or not, the same text
+        if force:
+            self._event(now, "forced: pre-arm checks skipped", broadcast=False)
         return ACCEPTED
+
+    def _refuse_arming(self, now: float, state: VehicleState, failure: str) -> None:
+        """Commander::arm: "Arming denied: Resolve system health failures first". The reason goes out as a
+        STATUSTEXT only where its health check has a legacy mavlink_log text (geofenceCheck.cpp, batteryCheck.cpp);
+        modeCheck.cpp's "No valid global position estimate" is an event only. The vehicle's log names it."""
+        if failure.startswith("Geofence: "):
+            self._event(now, failure, mavlink.MAV_SEVERITY_CRITICAL)
+        elif failure in BATTERY_FAILURES.values():
+            self._event(now, *BATTERY_TEXTS[battery_warning_level(self.battery_fraction(state), self.params)])
+        self._event(now, f"arming refused: {failure}", broadcast=False)
+        self._event(now, "Arming denied: Resolve system health failures first\t", mavlink.MAV_SEVERITY_CRITICAL)
 
     def disarm(self, now: float, state: VehicleState, force: bool, reason: str) -> int:
         if not self.armed:
@@ -175,7 +191,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             return TEMPORARILY_REJECTED
         self.armed, self.state_changed, self.offboard_fallback = False, True, False
         self._forget_failsafe_actions()
-        self._event(now, f"Disarmed ({reason})")
+        self._event(now, f"Disarmed by {reason}\t")  # Commander::disarm, arm_disarm_reason_str
         if self.mode is not FlightMode.HOLD and state.on_ground:
             self.set_mode(FlightMode.HOLD, now, state, "disarmed on the ground")
         return ACCEPTED
@@ -193,7 +209,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             if p[0] == 1:
                 return self.arm(now, state, force)
             if p[0] == 0:
-                return self.disarm(now, state, force, "command")
+                return self.disarm(now, state, force, "external command")
             return DENIED
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             return self._takeoff(p[6], now, state)
@@ -382,11 +398,11 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         if self.ground_since_s is None:
             self.ground_since_s = now
         if self.has_flown:
-            delay, why = self.params["COM_DISARM_LAND"], "landed"
+            delay, why = self.params["COM_DISARM_LAND"], "landing"
         else:
-            delay, why = self.params["COM_DISARM_PRFLT"], "no takeoff after arming"
+            delay, why = self.params["COM_DISARM_PRFLT"], "auto preflight disarming"
         if delay >= 0 and now - self.ground_since_s >= delay and now - self.armed_at_s >= delay:
-            self.disarm(now, state, force=False, reason=f"auto-disarm: {why}")
+            self.disarm(now, state, force=False, reason=why)
 
     def _check_failsafes(self, now: float, state: VehicleState) -> None:
         self._run_delayed_failsafe(now, state)

@@ -32,7 +32,7 @@ def texts(pilot: LockstepPilot, since: int = 0) -> list[str]:
     for m in pilot.received[since:]:
         if m.get_type() != "STATUSTEXT":
             continue
-        if not m.id:
+        if not m.id and not m.chunk_seq and len(m.text) < 50:  # PX4's first text has id 0 even when chunked
             joined.append(m.text)
         elif len(m.text) < 50:
             parts = {**chunks.pop(m.id, {}), m.chunk_seq: m.text}
@@ -240,3 +240,21 @@ def test_long_texts_go_in_chunks_as_each_autopilot_sends_them_and_the_runners_li
         received += [m for m in link.tick() if m.get_type() == "STATUSTEXT"]
     assert [(m.id, m.chunk_seq, m.text) for m in received] == CHUNKS[autopilot]
     assert link.status_texts[-3:] == ["short", LONG, PX4_DISTANCE_TEXT]
+
+
+def test_px4s_first_text_has_id_0_and_its_chunks_are_still_joined():
+    """PX4's ids count from 0 on each link (STATUSTEXT.hpp ``msg.id = _id++``), so a long first text goes out in
+    chunks of id 0, which MAVLink reserves for single-message texts: the runner's link joins them from PX4."""
+    vehicle_end, client_end = memory_link_pair()
+    vehicle = SimulatedVehicle(VehicleConfig(seed=4), [vehicle_end])
+    link = VehicleLink(MemoryMavConnection(client_end, source_system=1, source_component=191), lambda: vehicle.time_s)
+    for _ in range(100):
+        vehicle.step()
+        link.tick()
+    received = []
+    for text in (LONG, "short"):
+        vehicle.autopilot._event(vehicle.time_s, text, mavlink.MAV_SEVERITY_CRITICAL)
+        vehicle.step()
+        received += [m for m in link.tick() if m.get_type() == "STATUSTEXT"]
+    assert [(m.id, m.chunk_seq) for m in received] == [(0, 0), (0, 1), (1, 0)]
+    assert link.status_texts[-2:] == [LONG, "short"]

@@ -4,10 +4,13 @@ The client is pymavlink (MAVLink 2 bytes through :class:`MemoryMavConnection`), 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
+
+from test_autopilot_fences import texts
 
 from sitl_bridge.px4_modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
@@ -61,6 +64,39 @@ def test_arming_refused_without_gps_unless_forced(pilot):
     assert not autopilot.armed
     assert autopilot.handle_command(ARM, (1, 21196, 0, 0, 0, 0, 0), 0.0, state) == ACCEPTED  # forced
     assert autopilot.armed
+
+
+def statustexts(pilot: LockstepPilot) -> list[tuple[int, str]]:
+    """(severity, text) of each STATUSTEXT received, chunks joined (the denial is 52 bytes: two chunks)."""
+    severities = [m.severity for m in pilot.received if m.get_type() == "STATUSTEXT" and m.chunk_seq == 0]
+    return list(zip(severities, texts(pilot), strict=True))
+
+
+def test_arming_texts_are_px4s_and_name_a_reason_only_where_its_health_check_has_a_text(pilot):
+    """Commander::arm / disarm (PX4 >= 1.14): "Armed by external command", "Disarmed by ..."; a refusal says
+    "Arming denied: Resolve system health failures first", after the check's own text if it has one (the battery's
+    and the geofence's legacy mavlink_log texts; no position is an event only)."""
+    critical, info = mavlink.MAV_SEVERITY_CRITICAL, mavlink.MAV_SEVERITY_INFO
+    denied = (critical, "Arming denied: Resolve system health failures first\t")
+    autopilot = pilot.vehicle.autopilot
+    autopilot.gps_ok = False
+    assert pilot.command(ARM, 1) == TEMPORARILY_REJECTED and statustexts(pilot) == [denied]
+    autopilot.gps_ok = True
+    full = pilot.vehicle.state.battery_wh
+    pilot.vehicle.state = dataclasses.replace(pilot.vehicle.state, battery_wh=0.06 * full)
+    pilot.received.clear()
+    assert pilot.command(ARM, 1) == TEMPORARILY_REJECTED
+    assert statustexts(pilot) == [(critical, "Critical battery\t"), denied]
+    pilot.vehicle.state = dataclasses.replace(pilot.vehicle.state, battery_wh=full)
+    pilot.received.clear()
+    assert pilot.command(ARM, 1) == ACCEPTED and pilot.command(ARM, 0) == ACCEPTED
+    assert statustexts(pilot) == [(info, "Armed by external command\t"), (info, "Disarmed by external command\t")]
+    pilot.received.clear()
+    assert pilot.command(ARM, 1) == ACCEPTED
+    pilot.vehicle.run(pilot.vehicle.params["COM_DISARM_PRFLT"] + 0.5)
+    while (m := pilot.conn.recv_msg()) is not None:
+        pilot.received.append(m)
+    assert statustexts(pilot)[-1] == (info, "Disarmed by auto preflight disarming\t")
 
 
 def test_disarm_in_air_needs_force(pilot):
