@@ -29,6 +29,7 @@ def mission_report(runner) -> dict:
         "events": runner.events,
         "autopilot": runner.flavour.name,
         "autopilot_fence": runner.autopilot_fence,
+        "companion_loss": runner.companion_loss,
         "resumptions": runner.link_loss.resumptions,
         "estimator": runner.estimator.counters(),
         "vehicle_time": {"offset_s": runner.boot_time.offset_s, "timeline_changes": runner.boot_time.timeline_changes,

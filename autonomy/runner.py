@@ -31,6 +31,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.autopilot_fence import fence_params, home_offset_ne, judge_autopilot_fence
+from autonomy.companion_loss import companion_loss_params, judge_companion_loss
 from autonomy.autopilots import LINK_LOSS_PARAM, PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
 from autonomy.estimator import PoseEstimator
@@ -90,6 +91,7 @@ class MissionRunner:
         self._last_decision_s = -math.inf
         self._height_target_m = mission.flight.altitude_m  # above the vehicle's home
         self.autopilot_fence: dict | None = None  # what the preflight check found (autonomy.autopilot_fence)
+        self.companion_loss: dict | None = None  # ... and what the autopilot does without us (autonomy.companion_loss)
         self._record("CONNECT", "start")
 
     # ------------------------------------------------------------------ bookkeeping
@@ -128,6 +130,10 @@ class MissionRunner:
     def _judged_params(self) -> tuple[str, ...]:
         """The parameters the runner judges by: the autopilot's fence and what its link-loss failsafe does."""
         return (*fence_params(self.flavour.name), LINK_LOSS_PARAM[self.flavour.name])
+
+    def _preflight_params(self) -> tuple[str, ...]:
+        """The parameters the preflight checks read: the judged ones and what the autopilot does without us."""
+        return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name))))
 
     def _probe_sender(self) -> Callable[[int], None] | None:
         """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; not the MAVSDK backend)."""
@@ -198,7 +204,7 @@ class MissionRunner:
         except UnsupportedAutopilot as exc:
             raise MissionAborted(str(exc)) from None
         self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour, self._probe_sender())
-        self.link.request_params(self._judged_params())  # read while the pose estimate converges
+        self.link.request_params(self._preflight_params())  # read while the pose estimate converges
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
 
     def _ask_for_telemetry(self) -> None:
@@ -224,27 +230,49 @@ class MissionRunner:
         if not self.mission.home_altitude_known:
             self._event("warning", f"the mission gives no home altitude: the search altitude is held above the "
                                    f"vehicle's home ({describe_point(home)}), the search area assumed at its level")
-        self._check_autopilot_fence(home)
+        self._check_autopilot_settings(home)
         self._record("ARM", "pose estimate converged, home known")
 
-    def _check_autopilot_fence(self, home) -> None:
+    def _check_autopilot_settings(self, home) -> None:
         """The autopilot's own geofence against the mission (autonomy.autopilot_fence): refused if it would stop
-        the search, a warning if there is none, recorded otherwise."""
-        names = fence_params(self.flavour.name)
+        the search, a warning if there is none, recorded otherwise; and what it does if this computer goes silent
+        (autonomy.companion_loss): a warning if it would hover until its battery is empty. Unread parameters
+        (an ArduPilot without a battery monitor has no BATT_*): that check is not made, with a warning."""
+        names = self._preflight_params()
         try:
             self.wait_until(lambda: all(name in self.link.params for name in names), self.config.param_timeout_s,
-                            "reading the autopilot's fence parameters",
+                            "reading the autopilot's fence and failsafe parameters",
                             repeat=(STREAM_REQUEST_PERIOD_S, lambda: self.link.request_params(names)))
-        except MissionAborted as exc:
-            self.autopilot_fence = {"checked": False, "reason": str(exc)}
-            self._event("autopilot-fence", f"not checked ({exc})")
+        except MissionAborted:
+            pass  # judged below with what arrived
+        fence = self._read(fence_params(self.flavour.name))
+        if fence is None:
+            self.autopilot_fence = {"checked": False, "reason": "its parameters were not read"}
+            self._event("autopilot-fence", f"not checked (its parameters were not read within "
+                                           f"{self.config.param_timeout_s:g} s)")
+        else:
+            self.autopilot_fence, refusal, note = judge_autopilot_fence(self.flavour.name, fence, self.mission, home,
+                                                                        self.config.fence_margin_m)
+            if refusal is not None:
+                raise MissionAborted(f"refused before arming: {refusal}")
+            self._event("autopilot-fence", note)
+        failsafes = self._read(companion_loss_params(self.flavour.name, required_only=True))
+        if failsafes is None:
+            self.companion_loss = {"checked": False, "reason": "its parameters were not read"}
+            self._event("warning", "what the autopilot does if this computer goes silent is not known: its failsafe "
+                                   "parameters were not read")
             return
-        values = {name: self.link.params[name] for name in names}
-        self.autopilot_fence, refusal, note = judge_autopilot_fence(self.flavour.name, values, self.mission, home,
-                                                                    self.config.fence_margin_m)
-        if refusal is not None:
-            raise MissionAborted(f"refused before arming: {refusal}")
-        self._event("autopilot-fence", note)
+        failsafes |= {name: self.link.params[name] for name in companion_loss_params(self.flavour.name)
+                      if name in self.link.params}
+        self.companion_loss, warning = judge_companion_loss(self.flavour.name, failsafes,
+                                                            getattr(self.link, "companion_system_id", None))
+        if warning is not None:
+            self._event("warning", warning)
+
+    def _read(self, names: tuple[str, ...]) -> dict[str, float] | None:
+        """The parameters ``names`` as read, or None if any is missing."""
+        values = {name: self.link.params.get(name) for name in names}
+        return None if None in values.values() else values
 
     def _set_mode(self, mode: str) -> None:
         """MAV_CMD_DO_SET_MODE for ``mode`` (the autopilot's own numbers), done once the heartbeat shows it."""

@@ -260,6 +260,11 @@ class VehicleLink:
         return self.target_system is not None
 
     @property
+    def companion_system_id(self) -> int:
+        """This computer's MAVLink system id (the vehicle's, once discovered: see ``_on_message``)."""
+        return self.conn.mav.srcSystem
+
+    @property
     def flight_mode(self) -> str | None:
         """Mode name of the latest HEARTBEAT as pymavlink spells it for its autopilot ("OFFBOARD", "LOITER", "RTL",
         ... for PX4; "GUIDED", "RTL", "BRAKE", ... for ArduPilot Copter), None before one arrived."""

@@ -80,10 +80,11 @@ def test_a_fence_that_encloses_the_mission_is_recorded_and_flown(policy, autopil
 def test_without_answers_the_fence_is_not_checked_and_the_flight_goes_on(policy, monkeypatch):
     monkeypatch.setattr(VehicleLink, "request_params", lambda self, names: None)
     report = fly(policy, "px4")
-    assert report["autopilot_fence"] == {"checked": False, "reason": "reading the autopilot's fence parameters: "
-                                                                     "not within 5 s"}
-    assert events(report, "autopilot-fence") == ["not checked (reading the autopilot's fence parameters: not "
-                                                 "within 5 s)"]
+    unread = {"checked": False, "reason": "its parameters were not read"}
+    assert report["autopilot_fence"] == report["companion_loss"] == unread
+    assert events(report, "autopilot-fence") == ["not checked (its parameters were not read within 5 s)"]
+    assert "what the autopilot does if this computer goes silent is not known: its failsafe parameters were not " \
+           "read" in events(report, "warning")
     assert report["outcome"]["outcome"] == "completed"
 
 

@@ -68,16 +68,36 @@ def test_the_runner_flies_ardupilot_in_guided_with_its_own_take_off_and_streams(
     takeoff = commands[kinds.index(mavlink.MAV_CMD_NAV_TAKEOFF)]
     assert takeoff[3] == pytest.approx(small_mission().flight.altitude_m)
     assert kinds[-1] == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+    # ArduCopter's defaults: nothing would end the flight if this computer went silent (autonomy.companion_loss)
+    assert report["companion_loss"]["ends_the_flight"] is False
+    assert [w for w in events(report, "warning") if "goes silent" in w] == [
+        "if this computer goes silent during the search, ArduPilot Copter hovers until its battery is empty (GCS "
+        "failsafe: FS_GCS_ENABLE 0, SYSID_MYGCS 255 (does not act on this computer's silence); low battery: nothing "
+        "(BATT_FS_LOW_ACT 0); critical battery: nothing (BATT_FS_CRT_ACT 0)): set BATT_FS_LOW_ACT=2 (RTL at "
+        "BATT_LOW_VOLT), or FS_GCS_ENABLE=1 with SYSID_MYGCS=1"]
 
 
 def test_px4_gets_an_amsl_take_off_and_no_mode_request_before_arming(policy, tmp_path):
     report = fly(policy, "px4", tmp_path)
     assert states(report) == ALL_STATES and report["autopilot"] == "PX4"
+    assert [w for w in events(report, "warning") if "goes silent" in w] == [
+        "if this computer goes silent during the search, PX4 hovers until its battery is empty (offboard loss: holds "
+        "(Position, Hold without RC) (COM_OBL_RC_ACT 0); battery: only warns (COM_LOW_BAT_ACT 0)): set "
+        "COM_OBL_RC_ACT=3 (Return) or COM_LOW_BAT_ACT=3 (Return at critical charge)"]
     commands = [(m.command, m.param7) for m in ours(read_tlog(tmp_path / "flight.tlog"), "COMMAND_LONG")]
     kinds = [c[0] for c in commands]
     assert mavlink.MAV_CMD_DO_SET_MODE not in kinds[:kinds.index(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)]
     takeoff = commands[kinds.index(mavlink.MAV_CMD_NAV_TAKEOFF)]
     assert takeoff[1] == pytest.approx(small_mission().launch_point.alt_m + small_mission().flight.altitude_m, abs=0.01)
+
+
+def test_an_autopilot_that_comes_home_without_the_companion_gets_no_warning(policy):
+    report = fly(policy, "px4", params={"COM_LOW_BAT_ACT": 3})
+    assert report["companion_loss"] == {
+        "checked": True, "ends_the_flight": True, "params": {"COM_OBL_RC_ACT": 0, "COM_LOW_BAT_ACT": 3},
+        "steps": ["offboard loss: holds (Position, Hold without RC) (COM_OBL_RC_ACT 0)",
+                  "battery: returns home at critical charge, lands at emergency (COM_LOW_BAT_ACT 3)"]}
+    assert not [w for w in events(report, "warning") if "goes silent" in w]
 
 
 @pytest.mark.parametrize("guid_timeout_s", [1.0, 3.0, 5.0])  # 3 s: ArduPilot's default
