@@ -57,7 +57,7 @@ class LinkLossConfig:
     """A mode change out of the companion mode is judged this long after it was seen (the drone holds meanwhile),
     so that a safety announcement sent just after it still vetoes a resumption."""
     probe: UplinkProbeConfig = field(default_factory=UplinkProbeConfig)
-    """The TIMESYNC probe of the uplink (pymavlink links)."""
+    """The TIMESYNC probe of the uplink (both backends)."""
 
     def __post_init__(self) -> None:
         check_fields(self, (("max_resumptions", 0, 100), ("gap_s", 0.1, 60.0), ("evidence_window_s", 1.0, 600.0),

@@ -10,11 +10,13 @@ MAVSDK runs in its own thread with its own event loop; each call becomes a futur
 in the runner's terms (ACCEPTED, or FAILED with MAVSDK's error). Every call is bounded by the runner's command
 timeout; MAVSDK cannot cancel a call already running in its executor, so at the end MAVSDK is only destroyed once
 no call is pending (otherwise the daemon thread is left to the process exit). No tlog: MAVSDK does not expose the
-bytes it exchanges.
+bytes it exchanges. The uplink probe's TIMESYNC requests (autonomy.uplink_probe) go out and their replies come
+back through MAVSDK's MavlinkDirect plugin, the one way MAVSDK sends and reads a message it has no plugin for.
 """
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 from collections import deque
 from concurrent.futures import Future
@@ -63,6 +65,7 @@ class MavsdkLink:
         self._battery: float | None = None
         self._samples: list = []
         self.params: dict[str, float] = {}  # read with request_params (MAVSDK's Param plugin decodes them)
+        self._timesync_replies: deque[int] = deque(maxlen=1000)  # ts1 of TIMESYNC replies (MAVSDK's thread appends)
         self._pending: set[Future] = set()
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="mavsdk", daemon=True)
@@ -79,6 +82,7 @@ class MavsdkLink:
 
     async def _connect(self, url: str, timeout_s: float):
         from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.offboard import OffboardAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -88,9 +92,9 @@ class MavsdkLink:
         if system is None:
             raise LinkError(f"MAVSDK saw no autopilot on {url} within {timeout_s:g} s")
         self.action, self.offboard, self.telemetry = ActionAsync(system), OffboardAsync(system), TelemetryAsync(system)
-        self.param = ParamAsync(system)
+        self.param, self.direct = ParamAsync(system), MavlinkDirectAsync(system)
         for watch in (self._watch_position, self._watch_mode, self._watch_armed, self._watch_home,
-                      self._watch_battery, self._watch_status_text):
+                      self._watch_battery, self._watch_status_text, self._watch_timesync):
             self._loop.create_task(watch())
         self.target_system = 1
         return system
@@ -140,6 +144,16 @@ class MavsdkLink:
             self.status_texts = [*self.status_texts[1 - MAX_STATUS_TEXTS:], status.text]  # quoted in refusals
             self.status_log.append((self.clock(), status.text))
             self.status_count += 1  # after the append: the runner's thread reads the log by this count
+
+    async def _watch_timesync(self) -> None:
+        """TIMESYNC replies (tc1 != 0; tc1 = 0 is a request), as JSON from MavlinkDirect: their ts1 for the probe."""
+        async for message in self.direct.subscribe_message("TIMESYNC"):
+            try:
+                fields = json.loads(message.fields_json)
+                if int(fields["tc1"]) != 0:
+                    self._timesync_replies.append(int(fields["ts1"]))
+            except (ValueError, KeyError, TypeError):  # a malformed message is not an answer
+                continue
 
     # ------------------------------------------------------------------ the VehicleLink interface
     def tick(self) -> list:
@@ -228,6 +242,20 @@ class MavsdkLink:
             self.status_texts.append(str(error).splitlines()[0] if str(error) else type(error).__name__)
         result = mavlink.MAV_RESULT_ACCEPTED if error is None else mavlink.MAV_RESULT_FAILED
         self.acks.append(CommandAck(command, result, self.clock()))
+
+    def send_timesync_request(self, ts1: int) -> None:
+        """TIMESYNC with tc1 = 0 through MavlinkDirect (the vehicle echoes ``ts1``: autonomy.uplink_probe)."""
+        from mavsdk.plugins.mavlink_direct.mavlink_direct import MavlinkMessage
+
+        fields = {"tc1": 0, "ts1": int(ts1), "target_system": self.target_system or 0, "target_component": 0}
+        self._call(self.direct.send_message(MavlinkMessage(
+            message_name="TIMESYNC", target_system_id=self.target_system or 0, fields_json=json.dumps(fields))))
+
+    def take_timesync_replies(self) -> list[int]:
+        replies = []
+        while self._timesync_replies:  # popleft is atomic against MAVSDK's thread appending
+            replies.append(self._timesync_replies.popleft())
+        return replies
 
     def send_velocity(self, command: VelocityCommand, now_s: float) -> None:
         from mavsdk.asyncio.plugins.offboard import VelocityNedYaw

@@ -136,7 +136,7 @@ class MissionRunner:
         return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name))))
 
     def _probe_sender(self) -> Callable[[int], None] | None:
-        """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; not the MAVSDK backend)."""
+        """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; both backends can)."""
         return getattr(self.link, "send_timesync_request", None)
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str,

@@ -25,7 +25,7 @@ from missions.validation import check_fields
 
 @dataclass(frozen=True)
 class UplinkProbeConfig:
-    """How the runner probes the uplink (pymavlink links; the MAVSDK backend does not send TIMESYNC)."""
+    """How the runner probes the uplink (both backends: pymavlink, and MAVSDK through its MavlinkDirect plugin)."""
 
     period_s: float = 0.1
     """One request this often (the setpoint stream's rate: both travel the same uplink)."""

@@ -472,3 +472,29 @@ def test_the_runners_mavsdk_link_hears_the_autopilots_status_texts(udp_ports):
             link.close()
     assert text in received and link.status_count == len(received)
     assert link.status_since(link.status_count) == []
+
+
+def test_the_runners_mavsdk_link_probes_the_uplink_with_timesync(udp_ports):
+    """The uplink probe (autonomy.uplink_probe) through MAVSDK's MavlinkDirect plugin: requests with tc1 = 0 go out,
+    the vehicle's replies come back with the same ts1, and the probe counts them answered."""
+    import time
+
+    from autonomy.mavsdk_link import MavsdkLink
+    from autonomy.uplink_probe import UplinkProbe, UplinkProbeConfig
+
+    server, mavsdk_port = vehicle_server(udp_ports, 12)
+    with server:
+        link = MavsdkLink(f"udpin:0.0.0.0:{mavsdk_port}", time.monotonic)
+        try:
+            probe = UplinkProbe(UplinkProbeConfig(), link.send_timesync_request)
+            deadline = time.monotonic() + T
+            while probe.answered < 5 and time.monotonic() < deadline:
+                probe.tick(time.monotonic(), link.take_timesync_replies(), active=True)
+                time.sleep(0.1)
+            link.send_timesync_request(424242)
+            while 424242 not in (replies := link.take_timesync_replies()) and time.monotonic() < deadline:
+                time.sleep(0.05)
+        finally:
+            link.close()
+    assert probe.answered >= 5 and probe.sent - probe.answered <= 2  # the last ones may still be in flight
+    assert 424242 in replies
