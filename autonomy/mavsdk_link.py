@@ -70,7 +70,9 @@ class MavsdkLink:
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="mavsdk", daemon=True)
         self._thread.start()
-        self._drone = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
+        configuration = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+        self.companion_system_id: int = configuration.system_id  # MAVSDK's own (1 for a companion computer)
+        self._drone = Mavsdk(configuration)
         self._system = self._call(self._connect(mavsdk_url(url), connect_timeout_s)).result(connect_timeout_s + 5)
 
     # ------------------------------------------------------------------ the MAVSDK thread
