@@ -93,8 +93,10 @@ def test_a_mission_file_without_alt_m_is_flown_above_the_vehicles_home_with_a_wa
     assert "alt_m" not in mission_to_dict(mission)["scenario"]["home"]  # saved as read: still unknown
     report = fly(policy, mission, tmp_path)
     assert states(report)[-4:] == ["SEARCH", "RTL", "LAND", "DONE"]
-    (warning,) = [e["reason"] for e in report["events"] if e["event"] == "warning"]
+    warnings = [e["reason"] for e in report["events"] if e["event"] == "warning"]
+    (warning,) = [w for w in warnings if "home altitude" in w]  # (the other: PX4's defaults without the companion)
     assert "the mission gives no home altitude" in warning and "488.0 m AMSL" in warning
+    assert len(warnings) == 2 and "goes silent" in warnings[1]
     heights = search_heights(report, tmp_path)
     altitude = mission.flight.altitude_m
     assert altitude - 1.5 <= min(heights) and max(heights) <= altitude + 1.5
