@@ -25,8 +25,9 @@ from __future__ import annotations
 import math
 
 PX4_PARAMS = ("COM_OBL_RC_ACT", "COM_LOW_BAT_ACT")
-ARDUPILOT_PARAMS = ("FS_GCS_ENABLE", "SYSID_MYGCS", "BATT_FS_LOW_ACT", "BATT_LOW_VOLT", "BATT_LOW_MAH",
-                    "BATT_FS_CRT_ACT", "BATT_CRT_VOLT", "BATT_CRT_MAH")
+ARDUPILOT_REQUIRED = ("FS_GCS_ENABLE", "SYSID_MYGCS", "BATT_MONITOR")
+ARDUPILOT_BATTERY = ("BATT_FS_LOW_ACT", "BATT_LOW_VOLT", "BATT_LOW_MAH", "BATT_FS_CRT_ACT", "BATT_CRT_VOLT",
+                     "BATT_CRT_MAH")  # hidden while BATT_MONITOR is 0 (AP_PARAM_FLAG_ENABLE)
 PX4_OFFBOARD_LOSS = {0: "holds (Position, Hold without RC)", 1: "holds (Altitude)", 2: "holds (Stabilized)",
                      3: "returns home", 4: "lands where it is", 5: "holds (Hold)", 6: "cuts its motors (Terminate)",
                      7: "disarms"}
@@ -39,19 +40,23 @@ ENDS_THE_FLIGHT_PX4_OBL = {3, 4}  # Return, Land; Terminate and Disarm end it by
 ENDS_THE_FLIGHT_PX4_BATTERY = {2, 3}
 
 
-def companion_loss_params(autopilot: str, required_only: bool = False) -> tuple[str, ...]:
-    """The parameters to read for an autopilot flavour's name ("PX4" or "ArduPilot Copter"); ``required_only``:
-    without ArduPilot's BATT_*, which an ArduPilot without a battery monitor (BATT_MONITOR 0) does not have."""
+def companion_loss_params(autopilot: str, read: dict[str, float] | None = None) -> tuple[str, ...]:
+    """The parameters to read for an autopilot flavour's name ("PX4" or "ArduPilot Copter"). ``read``: what has
+    been read so far; ArduPilot's battery ones are then wanted only once BATT_MONITOR is read and not 0, because
+    BATT_MONITOR 0 hides them (AP_BattMonitor_Params.cpp: MONITOR carries AP_PARAM_FLAG_ENABLE), so waiting for
+    them would wait for nothing. Without ``read``: all that may exist."""
     if autopilot == "PX4":
         return PX4_PARAMS
-    return ARDUPILOT_PARAMS[:2] if required_only else ARDUPILOT_PARAMS
+    if read is not None and not read.get("BATT_MONITOR"):
+        return ARDUPILOT_REQUIRED
+    return ARDUPILOT_REQUIRED + ARDUPILOT_BATTERY
 
 
 def judge_companion_loss(autopilot: str, params: dict[str, float],
                          companion_system_id: int | None) -> tuple[dict, str | None]:
     """(the record for the mission report, a warning or None). ``params`` holds ``companion_loss_params``;
     ``companion_system_id``: the runner's MAVLink system id (None: unknown, ArduPilot's GCS failsafe not counted).
-    ArduPilot's BATT_* may be missing (no battery monitor): no battery failsafe then."""
+    ArduPilot with BATT_MONITOR 0 (or its BATT_* missing) has no battery failsafe."""
     value = {name: int(params[name]) if math.isfinite(params[name]) else None for name in params}
     if autopilot == "PX4":
         obl, battery = value["COM_OBL_RC_ACT"], value["COM_LOW_BAT_ACT"]
@@ -65,14 +70,15 @@ def judge_companion_loss(autopilot: str, params: dict[str, float],
         steps = [f"GCS failsafe: FS_GCS_ENABLE {gcs}, SYSID_MYGCS {mygcs} "
                  + ("(this computer: it " + ARDUPILOT_ACTIONS.get(gcs, "acts") + ")" if gcs_counts
                     else "(does not act on this computer's silence)")]
-        battery_acts = False
+        battery_acts, monitored = False, bool(value.get("BATT_MONITOR", 1))
         for level, action, thresholds in (("low", "BATT_FS_LOW_ACT", ("BATT_LOW_VOLT", "BATT_LOW_MAH")),
                                           ("critical", "BATT_FS_CRT_ACT", ("BATT_CRT_VOLT", "BATT_CRT_MAH"))):
             armed_threshold = any((params.get(name) or 0) > 0 for name in thresholds)
-            acts = value.get(action) not in (None, 0, 5) and armed_threshold
+            acts = monitored and value.get(action) not in (None, 0, 5) and armed_threshold
             battery_acts |= acts
+            setting = f"{action} {value[action]}" if monitored and action in value else "no battery monitor"
             steps.append(f"{level} battery: {ARDUPILOT_ACTIONS.get(value.get(action), 'nothing') if acts else 'nothing'} "
-                         f"({action} {value.get(action, 'not set: no battery monitor')})")
+                         f"({setting})")
         ends = gcs_counts or battery_acts
         fix = ("set BATT_FS_LOW_ACT=2 (RTL at BATT_LOW_VOLT), or FS_GCS_ENABLE=1 with SYSID_MYGCS="
                f"{companion_system_id if companion_system_id is not None else 'this computer'}")

@@ -131,9 +131,10 @@ class MissionRunner:
         """The parameters the runner judges by: the autopilot's fence and what its link-loss failsafe does."""
         return (*fence_params(self.flavour.name), LINK_LOSS_PARAM[self.flavour.name])
 
-    def _preflight_params(self) -> tuple[str, ...]:
-        """The parameters the preflight checks read: the judged ones and what the autopilot does without us."""
-        return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name))))
+    def _preflight_params(self, read: dict[str, float] | None = None) -> tuple[str, ...]:
+        """The parameters the preflight checks read: the judged ones and what the autopilot does without us;
+        ``read``: what has arrived, which decides whether ArduPilot's battery ones exist (companion_loss_params)."""
+        return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name, read))))
 
     def _probe_sender(self) -> Callable[[int], None] | None:
         """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; both backends can)."""
@@ -236,13 +237,15 @@ class MissionRunner:
     def _check_autopilot_settings(self, home) -> None:
         """The autopilot's own geofence against the mission (autonomy.autopilot_fence): refused if it would stop
         the search, a warning if there is none, recorded otherwise; and what it does if this computer goes silent
-        (autonomy.companion_loss): a warning if it would hover until its battery is empty. Unread parameters
-        (an ArduPilot without a battery monitor has no BATT_*): that check is not made, with a warning."""
-        names = self._preflight_params()
+        (autonomy.companion_loss): a warning if it would hover until its battery is empty. Waits for the parameters
+        that exist (ArduPilot's BATT_MONITOR 0 hides its BATT_*); a check whose parameters were not read within
+        param_timeout_s is not made, with a warning."""
+        def wanted() -> tuple[str, ...]:
+            return self._preflight_params(self.link.params)
         try:
-            self.wait_until(lambda: all(name in self.link.params for name in names), self.config.param_timeout_s,
+            self.wait_until(lambda: all(name in self.link.params for name in wanted()), self.config.param_timeout_s,
                             "reading the autopilot's fence and failsafe parameters",
-                            repeat=(STREAM_REQUEST_PERIOD_S, lambda: self.link.request_params(names)))
+                            repeat=(STREAM_REQUEST_PERIOD_S, lambda: self.link.request_params(wanted())))
         except MissionAborted:
             pass  # judged below with what arrived
         fence = self._read(fence_params(self.flavour.name))
@@ -256,7 +259,7 @@ class MissionRunner:
             if refusal is not None:
                 raise MissionAborted(f"refused before arming: {refusal}")
             self._event("autopilot-fence", note)
-        failsafes = self._read(companion_loss_params(self.flavour.name, required_only=True))
+        failsafes = self._read(companion_loss_params(self.flavour.name, {}))  # those every autopilot has
         if failsafes is None:
             self.companion_loss = {"checked": False, "reason": "its parameters were not read"}
             self._event("warning", "what the autopilot does if this computer goes silent is not known: its failsafe "

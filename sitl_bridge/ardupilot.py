@@ -99,6 +99,10 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
             status = mavlink.MAV_STATE_ACTIVE
         return self.MAV_AUTOPILOT, base_mode(self.mode, self.armed, not self.land_complete), int(self.mode), status
 
+    @property
+    def battery_monitored(self) -> bool:
+        return self.params["BATT_MONITOR"] != 0
+
     def battery_charge_state(self, fraction: float) -> int:
         return (mavlink.MAV_BATTERY_CHARGE_STATE_OK, mavlink.MAV_BATTERY_CHARGE_STATE_LOW,
                 mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL)[self.battery_failsafe]
@@ -127,7 +131,7 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
         fence = self.fence_prearm_failure()
         if fence:
             return fence
-        arm_volt = self.params["BATT_ARM_VOLT"]
+        arm_volt = self.params["BATT_ARM_VOLT"] if self.battery_monitored else 0.0
         if arm_volt > 0 and battery_voltage_v(self.battery_fraction(state)) < arm_volt:
             return "Battery 1 below minimum arming voltage"
         return None

@@ -46,7 +46,10 @@ class CopterFailsafes:
                 self._event(now, "GCS Failsafe Cleared", mavlink.MAV_SEVERITY_WARNING)
 
     def _check_battery(self, now: float, state: VehicleState) -> None:
-        """AP_BattMonitor::check_failsafes: voltage below for BATT_LOW_TIMER, or remaining mAh below."""
+        """AP_BattMonitor::check_failsafes: voltage below for BATT_LOW_TIMER, or remaining mAh below; nothing
+        without a monitor (BATT_MONITOR 0)."""
+        if not self.battery_monitored:
+            return
         fraction = self.battery_fraction(state)
         volts = battery_voltage_v(fraction)
         remaining_mah = consumed_mah(state.battery_wh)

@@ -4,7 +4,8 @@ Sources (ArduPilot/ardupilot, read through the search tools; see docs/sitl.md): 
 (SYSID_MYGCS, RTL_*, FS_GCS_ENABLE, LAND_SPEED*, DISARM_DELAY, GUID_TIMEOUT, FS_GCS_TIMEOUT, FS_OPTIONS),
 libraries/AC_WPNav/AC_WPNav.cpp (WPNAV_SPEED 1000, WPNAV_SPEED_UP 250, WPNAV_SPEED_DN 150),
 libraries/AC_Fence/AC_Fence.cpp (FENCE_*),
-libraries/AP_BattMonitor/AP_BattMonitor_Params.cpp (BATT_LOW_VOLT 10.5 V on Copter, the others 0 = off) and
+libraries/AP_BattMonitor/AP_BattMonitor_Params.cpp (BATT_MONITOR with AP_PARAM_FLAG_ENABLE, BATT_LOW_VOLT 10.5 V
+on Copter, the others 0 = off) and
 libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp (SRn_* stream rates: 0 on Copter, so nothing streams until a
 ground station asks). Units are ArduPilot's (cm, cm/s, ms) because that is what a client reads and writes.
 
@@ -21,6 +22,7 @@ STREAM_GROUPS = ("EXT_STAT", "POSITION", "EXTRA1", "EXTRA2", "EXTRA3")
 
 _FAILSAFE_ACTIONS = "0 none, 1 RTL, 2 RTL (the old 'continue mission in Auto'), 5 land, 7 brake or land"
 _BATTERY_ACTIONS = "0 warn only, 1 land, 2 RTL, 7 brake or land"
+_MONITOR = "BATT_MONITOR"
 
 ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("SYSID_THISMAV", INT16, 1, 1, 255,
@@ -62,16 +64,27 @@ ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
               "fence floor above home (m), armed once the vehicle is FENCE_MARGIN above it, off while landing"),
     ParamSpec("FENCE_RADIUS", REAL32, 300.0, 30.0, 10000.0, "circle fence radius around home (m)"),
     ParamSpec("FENCE_MARGIN", REAL32, 2.0, 1.0, 10.0, "distance the autopilot keeps from a fence (m)"),
+    # BATT_MONITOR carries AP_PARAM_FLAG_ENABLE: while it is 0 every other BATT_* parameter is hidden (not listed,
+    # not readable, not settable) and there is no battery failsafe. ArduPilot's fallback default is 0; boards with
+    # a power module set 4 in their hwdef (HAL_BATT_MONITOR_DEFAULT), as this simulated one does.
+    ParamSpec("BATT_MONITOR", INT8, 4, 0, 30, "battery monitor: 0 none (hides the other BATT_*), 4 analog "
+              "voltage and current", allowed=(0, 4)),
     ParamSpec("BATT_LOW_VOLT", REAL32, 10.5, 0.0, 100.0,
-              "low-battery failsafe below this voltage for BATT_LOW_TIMER (V); 0 off"),
-    ParamSpec("BATT_CRT_VOLT", REAL32, 0.0, 0.0, 100.0, "critical-battery failsafe voltage (V); 0 off"),
+              "low-battery failsafe below this voltage for BATT_LOW_TIMER (V); 0 off", enabled_by=_MONITOR),
+    ParamSpec("BATT_CRT_VOLT", REAL32, 0.0, 0.0, 100.0, "critical-battery failsafe voltage (V); 0 off",
+              enabled_by=_MONITOR),
     ParamSpec("BATT_LOW_MAH", REAL32, 0.0, 0.0, 100000.0,
-              "low-battery failsafe below this remaining capacity (mAh); 0 off"),
-    ParamSpec("BATT_CRT_MAH", REAL32, 0.0, 0.0, 100000.0, "critical-battery failsafe remaining capacity (mAh); 0 off"),
-    ParamSpec("BATT_LOW_TIMER", INT8, 10, 0, 120, "the voltage must stay below a threshold this long (s)"),
-    ParamSpec("BATT_FS_LOW_ACT", INT8, 0, 0, 7, "low-battery action: " + _BATTERY_ACTIONS, allowed=(0, 1, 2, 7)),
-    ParamSpec("BATT_FS_CRT_ACT", INT8, 0, 0, 7, "critical-battery action: " + _BATTERY_ACTIONS, allowed=(0, 1, 2, 7)),
-    ParamSpec("BATT_ARM_VOLT", REAL32, 0.0, 0.0, 100.0, "arming refused below this voltage (V); 0 off"),
+              "low-battery failsafe below this remaining capacity (mAh); 0 off", enabled_by=_MONITOR),
+    ParamSpec("BATT_CRT_MAH", REAL32, 0.0, 0.0, 100000.0,
+              "critical-battery failsafe remaining capacity (mAh); 0 off", enabled_by=_MONITOR),
+    ParamSpec("BATT_LOW_TIMER", INT8, 10, 0, 120, "the voltage must stay below a threshold this long (s)",
+              enabled_by=_MONITOR),
+    ParamSpec("BATT_FS_LOW_ACT", INT8, 0, 0, 7, "low-battery action: " + _BATTERY_ACTIONS, allowed=(0, 1, 2, 7),
+              enabled_by=_MONITOR),
+    ParamSpec("BATT_FS_CRT_ACT", INT8, 0, 0, 7, "critical-battery action: " + _BATTERY_ACTIONS,
+              allowed=(0, 1, 2, 7), enabled_by=_MONITOR),
+    ParamSpec("BATT_ARM_VOLT", REAL32, 0.0, 0.0, 100.0, "arming refused below this voltage (V); 0 off",
+              enabled_by=_MONITOR),
 ) + tuple(
     ParamSpec(f"SR{link}_{group}", INT16, 0, 0, 50,
               f"stream rate of the {group} group on link {link} (Hz); REQUEST_DATA_STREAM changes it at once, "

@@ -177,6 +177,12 @@ class AutopilotBase:
     def battery_fraction(self, state: VehicleState) -> float:
         return state.battery_wh / self.airframe.battery_capacity_wh
 
+    @property
+    def battery_monitored(self) -> bool:
+        """Whether the autopilot measures its battery (ArduPilot: BATT_MONITOR non-zero); without, SYS_STATUS says
+        so (-1) and there is no battery failsafe."""
+        return True
+
     def _zoom(self, zoom_type: int, value: float, now: float) -> int:
         """MAV_CMD_SET_CAMERA_ZOOM: zoom range (0-100 %) or steps of 10 %."""
         if zoom_type == mavlink.ZOOM_TYPE_RANGE and 0.0 <= value <= 100.0:

@@ -32,6 +32,7 @@ class ParamSpec:
     maximum: float
     doc: str
     allowed: tuple[int, ...] = ()  # for enumerations: the values this simulator implements
+    enabled_by: str = ""  # ArduPilot's AP_PARAM_FLAG_ENABLE: hidden (not listed, read or set) while that one is 0
 
 
 # Defaults follow PX4 v1.14 except where a comment says why not.
@@ -120,23 +121,39 @@ class ParameterStore:
                  read_only: frozenset[str] = READ_ONLY):
         """``specs``: the personality's table (PX4's by default); ``read_only``: names PARAM_SET may not change."""
         self.specs = {spec.name: spec for spec in specs}
-        self.names = [spec.name for spec in specs]
         self.read_only = read_only
         self._values = {spec.name: float(spec.default) for spec in specs}
-        for name, value in (overrides or {}).items():
-            error = self.check(name, value)
+        for name, value in (overrides or {}).items():  # hidden ones too: the order of overrides must not matter
+            error = self._check_value(name, value)
             if error:
                 raise ValueError(error)
             self._values[name] = float(value)
 
     def __getitem__(self, name: str) -> float:
+        """The stored value, hidden or not (the autopilot's own code reads them all)."""
         return self._values[name]
 
     def __len__(self) -> int:
         return len(self.names)
 
+    @property
+    def names(self) -> list[str]:
+        """The visible parameters in table order: what PARAM_REQUEST_LIST sends and param_index counts."""
+        return [name for name in self.specs if self.visible(name)]
+
+    def visible(self, name: str) -> bool:
+        """Known, and not hidden by a zero enable parameter (ArduPilot's BATT_MONITOR 0 hides BATT_*)."""
+        spec = self.specs.get(name)
+        return spec is not None and (not spec.enabled_by or self._values[spec.enabled_by] != 0)
+
     def check(self, name: str, value: float) -> str | None:
         """Why ``value`` cannot be stored in ``name``, or None if it can."""
+        spec = self.specs.get(name)
+        if spec is not None and not self.visible(name):
+            return f"{name} is hidden while {spec.enabled_by} is 0"
+        return self._check_value(name, value)
+
+    def _check_value(self, name: str, value: float) -> str | None:
         spec = self.specs.get(name)
         if spec is None:
             return f"unknown parameter {name!r}"

@@ -97,6 +97,10 @@ def sys_status(v: TelemetrySource) -> mavlink.MAVLink_message:
         health &= ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
     if v.autopilot.prearm_failure(v.state) is not None:
         health &= ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    if not v.autopilot.battery_monitored:  # ArduPilot's send_sys_status without a monitor: 0 V, -1 A, -1 %
+        present = SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+        return mavlink.MAVLink_sys_status_message(present, present, health & present, 150, 0, -1, -1,
+                                                  0, 0, 0, 0, 0, 0)
     volts, amps, fraction = battery_reading(v)
     return mavlink.MAVLink_sys_status_message(SENSORS, SENSORS, health, 150, int(volts * 1000), int(amps * 100),
                                               int(round(fraction * 100)), 0, 0, 0, 0, 0, 0)
@@ -109,7 +113,9 @@ def battery_reading(v: TelemetrySource) -> tuple[float, float, float]:
     return volts, v.power_w / volts, fraction
 
 
-def battery_status(v: TelemetrySource) -> mavlink.MAVLink_message:
+def battery_status(v: TelemetrySource) -> mavlink.MAVLink_message | None:
+    if not v.autopilot.battery_monitored:
+        return None
     volts, amps, fraction = battery_reading(v)
     capacity_wh = v.config.airframe.battery_capacity_wh
     used_wh = capacity_wh - v.state.battery_wh

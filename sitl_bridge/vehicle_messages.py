@@ -173,7 +173,7 @@ class MessageHandlers:
         if msg.param_index >= 0:
             if msg.param_index < len(self.params):
                 endpoint.send(self._param_value(self.params.names[msg.param_index]))
-        elif _param_name(msg.param_id) in self.params.specs:
+        elif self.params.visible(_param_name(msg.param_id)):  # unknown or hidden: no answer, as ArduPilot and PX4
             endpoint.send(self._param_value(_param_name(msg.param_id)))
 
     def _on_param_set(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
@@ -181,8 +181,9 @@ class MessageHandlers:
             return
         name = _param_name(msg.param_id)
         spec = self.params.specs.get(name)
-        if spec is None:
-            self.log(f"PARAM_SET {name!r}: unknown parameter, ignored")
+        if not self.params.visible(name):
+            self.log(f"PARAM_SET {name!r}: " + ("unknown parameter" if spec is None else
+                                                f"hidden while {spec.enabled_by} is 0") + ", ignored")
             return
         decode = decode_bytewise if self.autopilot.PARAMS_BYTEWISE else decode_float
         error = self.params.set(name, decode(msg.param_value, spec.kind))

@@ -441,6 +441,35 @@ def test_battery_failsafe_low_voltage_for_batt_low_timer_returns():
     assert last(pilot, "HEARTBEAT").system_status == mavlink.MAV_STATE_CRITICAL
 
 
+def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_failsafe_off():
+    """AP_BattMonitor_Params.cpp: BATT_MONITOR carries AP_PARAM_FLAG_ENABLE, so at 0 the other BATT_* are not listed,
+    not answered and not settable, SYS_STATUS reports no battery (0 V, -1 A, -1 %) and nothing fails safe on it."""
+    pilot = airborne({"BATT_MONITOR": 0, "BATT_LOW_VOLT": 16.75, "BATT_FS_LOW_ACT": 2})  # monitored: RTL within 60 s
+    before = len(pilot.received)
+    pilot.mav.param_request_list_send(1, 1)
+    fly(pilot, 1.0)
+    listed = [m for m in pilot.received[before:] if m.get_type() == "PARAM_VALUE"]
+    names = [m.param_id for m in listed]
+    assert "BATT_MONITOR" in names and [n for n in names if n.startswith("BATT_")] == ["BATT_MONITOR"]
+    assert {m.param_count for m in listed} == {len(names)} and sorted(m.param_index for m in listed) == \
+        list(range(len(names)))
+    before = len(pilot.received)
+    pilot.mav.param_request_read_send(1, 1, b"BATT_FS_LOW_ACT", -1)
+    pilot.mav.param_set_send(1, 1, b"BATT_FS_LOW_ACT", 1.0, mavlink.MAV_PARAM_TYPE_INT8)
+    fly(pilot, 1.0)
+    assert not [m for m in pilot.received[before:] if m.get_type() == "PARAM_VALUE"]
+    assert pilot.vehicle.params["BATT_FS_LOW_ACT"] == 2  # the hidden value is kept for when the monitor returns
+    fly(pilot, 60.0)
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_SYS_STATUS) == ACCEPTED
+    status = last(pilot, "SYS_STATUS")
+    assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (0, -1, -1)
+    assert not status.onboard_control_sensors_present & mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+    assert pilot.vehicle.autopilot.battery_failsafe == 0 and pilot.vehicle.autopilot.mode is CopterMode.GUIDED
+    assert pilot.set_param("BATT_MONITOR", 4) == 4  # visible again, with the kept value
+    pilot.mav.param_request_read_send(1, 1, b"BATT_FS_LOW_ACT", -1)
+    assert pilot.wait_message("PARAM_VALUE", 0.5, lambda m: m.param_id == "BATT_FS_LOW_ACT").param_value == 2.0
+
+
 # ---------------------------------------------------------------- parameters, capabilities, streams, home
 def test_parameters_are_floats_with_ardupilot_types():
     pilot = copter()

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import pytest
 
-from autonomy.companion_loss import judge_companion_loss
+from autonomy.companion_loss import (ARDUPILOT_BATTERY, ARDUPILOT_REQUIRED, companion_loss_params,
+                                     judge_companion_loss)
 
-ARDUPILOT_DEFAULTS = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_FS_LOW_ACT": 0, "BATT_LOW_VOLT": 10.5,
+ARDUPILOT_DEFAULTS = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_MONITOR": 4, "BATT_FS_LOW_ACT": 0, "BATT_LOW_VOLT": 10.5,
                       "BATT_LOW_MAH": 0, "BATT_FS_CRT_ACT": 0, "BATT_CRT_VOLT": 0, "BATT_CRT_MAH": 0}
 
 
@@ -35,9 +36,24 @@ def test_ardupilot_ends_it_with_its_gcs_failsafe_on_this_computer_or_an_armed_ba
 
 
 def test_an_ardupilot_without_a_battery_monitor_has_no_battery_failsafe():
-    """BATT_MONITOR 0 hides every other BATT_* parameter: only the GCS failsafe is left."""
-    gcs_only = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255}
+    """BATT_MONITOR 0 hides every other BATT_* parameter: only the GCS failsafe is left, even if stale BATT_* values
+    (read before the monitor was switched off) would act."""
+    gcs_only = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_MONITOR": 0}
     record, warning = judge_companion_loss("ArduPilot Copter", gcs_only, 1)
-    assert not record["ends_the_flight"] and "(BATT_FS_LOW_ACT not set: no battery monitor)" in warning
-    record, warning = judge_companion_loss("ArduPilot Copter", {"FS_GCS_ENABLE": 2, "SYSID_MYGCS": 1}, 1)
+    assert not record["ends_the_flight"] and "low battery: nothing (no battery monitor)" in warning
+    record, warning = judge_companion_loss("ArduPilot Copter", {**ARDUPILOT_DEFAULTS, "BATT_FS_LOW_ACT": 2,
+                                                                "BATT_MONITOR": 0}, 1)
+    assert not record["ends_the_flight"]
+    record, warning = judge_companion_loss("ArduPilot Copter", {"FS_GCS_ENABLE": 2, "SYSID_MYGCS": 1,
+                                                                "BATT_MONITOR": 0}, 1)
     assert record["ends_the_flight"] and warning is None
+
+
+@pytest.mark.parametrize("read, wanted", [
+    (None, ARDUPILOT_REQUIRED + ARDUPILOT_BATTERY),  # before anything is read: all that may exist
+    ({}, ARDUPILOT_REQUIRED),  # BATT_MONITOR not read yet: wait for it first
+    ({"BATT_MONITOR": 0}, ARDUPILOT_REQUIRED),  # hidden: not waited for
+    ({"BATT_MONITOR": 4}, ARDUPILOT_REQUIRED + ARDUPILOT_BATTERY)])
+def test_ardupilots_battery_parameters_are_wanted_only_once_a_battery_monitor_is_known(read, wanted):
+    assert companion_loss_params("ArduPilot Copter", read) == wanted
+    assert companion_loss_params("PX4", read) == ("COM_OBL_RC_ACT", "COM_LOW_BAT_ACT")

@@ -77,6 +77,23 @@ def test_the_runner_flies_ardupilot_in_guided_with_its_own_take_off_and_streams(
         "BATT_LOW_VOLT), or FS_GCS_ENABLE=1 with SYSID_MYGCS=1"]
 
 
+def test_an_ardupilot_without_a_battery_monitor_is_judged_without_waiting_for_its_hidden_battery_parameters(policy):
+    """BATT_MONITOR 0 hides the other BATT_* parameters (AP_PARAM_FLAG_ENABLE): they never answer, so the runner
+    must not wait its parameter timeout (5 s) for them, and the warning says there is no battery failsafe."""
+    report = fly(policy, "ardupilot", params={"BATT_MONITOR": 0})
+    assert states(report) == ALL_STATES
+    assert report["companion_loss"]["params"] == {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_MONITOR": 0}
+    assert [w for w in events(report, "warning") if "goes silent" in w] == [
+        "if this computer goes silent during the search, ArduPilot Copter hovers until its battery is empty (GCS "
+        "failsafe: FS_GCS_ENABLE 0, SYSID_MYGCS 255 (does not act on this computer's silence); low battery: nothing "
+        "(no battery monitor); critical battery: nothing (no battery monitor)): set BATT_FS_LOW_ACT=2 (RTL at "
+        "BATT_LOW_VOLT), or FS_GCS_ENABLE=1 with SYSID_MYGCS=1"]
+    # simulated time, lockstep: the parameters are judged as soon as the ones that exist are in (well under 5 s)
+    (fence,) = [e["time_s"] for e in report["events"] if e["event"] == "autopilot-fence"]
+    preflight = next(t["time_s"] for t in report["transitions"] if t["to"] == "PREFLIGHT")
+    assert fence - preflight < 2.0
+
+
 def test_px4_gets_an_amsl_take_off_and_no_mode_request_before_arming(policy, tmp_path):
     report = fly(policy, "px4", tmp_path)
     assert states(report) == ALL_STATES and report["autopilot"] == "PX4"
