@@ -10,11 +10,17 @@
   ``manifest.training_config["flight"]``). The action scale, the camera footprint, what one step and ``time_progress``
   mean all come from them; a policy flown with other settings is flown outside what it learned. ``hrlsac mission``
   refuses such a mission unless ``--accept-flight-mismatch`` is given (then it warns, naming each difference).
+* :func:`judge_autopilot_settings`: the autopilot's parameters as read, judged: its own geofence against the
+  mission (:mod:`autonomy.autopilot_fence`, a refusal if it would stop the search) and what it does if the companion
+  computer goes silent (:mod:`autonomy.companion_loss`, a warning if it would hover until its battery is empty).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
+from autonomy.autopilot_fence import fence_params, judge_autopilot_fence
+from autonomy.companion_loss import companion_loss_params, judge_companion_loss
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.mission import FlightSettings, Mission
 
@@ -62,3 +68,49 @@ def flight_mismatches(flight: FlightSettings, training_config: dict) -> list[str
         if theirs is not None and not math.isclose(float(ours), float(theirs), rel_tol=1e-9, abs_tol=1e-9):
             differences.append(f"{name}: mission {ours:g}, trained {theirs:g}")
     return differences
+
+
+@dataclass
+class SettingsJudgement:
+    """What :func:`judge_autopilot_settings` found: the report's two records, a refusal or None, and the events to
+    record (kind, text) in order."""
+
+    autopilot_fence: dict
+    companion_loss: dict | None
+    refusal: str | None = None
+    events: list[tuple[str, str]] = field(default_factory=list)
+
+
+def _read(params: dict[str, float], names: tuple[str, ...]) -> dict[str, float] | None:
+    """The parameters ``names`` as read, or None if any is missing."""
+    values = {name: params.get(name) for name in names}
+    return None if None in values.values() else values
+
+
+def judge_autopilot_settings(autopilot: str, params: dict[str, float], mission: Mission, home: GeoPoint,
+                             fence_margin_m: float, companion_system_id: int | None,
+                             param_timeout_s: float) -> SettingsJudgement:
+    """The autopilot's fence and companion-loss parameters (``params``: what was read within ``param_timeout_s``)
+    judged for ``mission`` flown from ``home``. A check whose parameters were not all read is not made, and says so.
+    ``autopilot``: the flavour's name ("PX4" or "ArduPilot Copter")."""
+    fence = _read(params, fence_params(autopilot))
+    if fence is None:
+        judgement = SettingsJudgement({"checked": False, "reason": "its parameters were not read"}, None,
+                                      events=[("autopilot-fence", f"not checked (its parameters were not read "
+                                                                  f"within {param_timeout_s:g} s)")])
+    else:
+        record, refusal, note = judge_autopilot_fence(autopilot, fence, mission, home, fence_margin_m)
+        if refusal is not None:
+            return SettingsJudgement(record, None, refusal=f"refused before arming: {refusal}")
+        judgement = SettingsJudgement(record, None, events=[("autopilot-fence", note)])
+    failsafes = _read(params, companion_loss_params(autopilot, {}))  # those every autopilot has
+    if failsafes is None:
+        judgement.companion_loss = {"checked": False, "reason": "its parameters were not read"}
+        judgement.events.append(("warning", "what the autopilot does if this computer goes silent is not known: its "
+                                            "failsafe parameters were not read"))
+        return judgement
+    failsafes |= {name: params[name] for name in companion_loss_params(autopilot) if name in params}
+    judgement.companion_loss, warning = judge_companion_loss(autopilot, failsafes, companion_system_id)
+    if warning is not None:
+        judgement.events.append(("warning", warning))
+    return judgement

@@ -30,8 +30,8 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from autonomy.autopilot_fence import fence_params, home_offset_ne, judge_autopilot_fence
-from autonomy.companion_loss import companion_loss_params, judge_companion_loss
+from autonomy.autopilot_fence import fence_params, home_offset_ne
+from autonomy.companion_loss import companion_loss_params
 from autonomy.autopilots import LINK_LOSS_PARAM, PX4, AutopilotFlavour, UnsupportedAutopilot, flavour_for
 from autonomy.clocks import Clock, WallClock
 from autonomy.estimator import PoseEstimator
@@ -39,7 +39,7 @@ from autonomy.failsafes import blind_reason, judge_search
 from autonomy.geofence import guard_velocity
 from autonomy.link_loss import LinkLossMonitor
 from autonomy.mission_report import mission_report
-from autonomy.preflight import describe_point, home_disagreement
+from autonomy.preflight import describe_point, home_disagreement, judge_autopilot_settings
 from autonomy.runner_config import RunnerConfig
 from autonomy.search_pilot import Decision, DecisionWorker, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
@@ -247,35 +247,16 @@ class MissionRunner:
                             "reading the autopilot's fence and failsafe parameters",
                             repeat=(STREAM_REQUEST_PERIOD_S, lambda: self.link.request_params(wanted())))
         except MissionAborted:
-            pass  # judged below with what arrived
-        fence = self._read(fence_params(self.flavour.name))
-        if fence is None:
-            self.autopilot_fence = {"checked": False, "reason": "its parameters were not read"}
-            self._event("autopilot-fence", f"not checked (its parameters were not read within "
-                                           f"{self.config.param_timeout_s:g} s)")
-        else:
-            self.autopilot_fence, refusal, note = judge_autopilot_fence(self.flavour.name, fence, self.mission, home,
-                                                                        self.config.fence_margin_m)
-            if refusal is not None:
-                raise MissionAborted(f"refused before arming: {refusal}")
-            self._event("autopilot-fence", note)
-        failsafes = self._read(companion_loss_params(self.flavour.name, {}))  # those every autopilot has
-        if failsafes is None:
-            self.companion_loss = {"checked": False, "reason": "its parameters were not read"}
-            self._event("warning", "what the autopilot does if this computer goes silent is not known: its failsafe "
-                                   "parameters were not read")
-            return
-        failsafes |= {name: self.link.params[name] for name in companion_loss_params(self.flavour.name)
-                      if name in self.link.params}
-        self.companion_loss, warning = judge_companion_loss(self.flavour.name, failsafes,
-                                                            getattr(self.link, "companion_system_id", None))
-        if warning is not None:
-            self._event("warning", warning)
-
-    def _read(self, names: tuple[str, ...]) -> dict[str, float] | None:
-        """The parameters ``names`` as read, or None if any is missing."""
-        values = {name: self.link.params.get(name) for name in names}
-        return None if None in values.values() else values
+            pass  # judged with what arrived
+        judgement = judge_autopilot_settings(self.flavour.name, self.link.params, self.mission, home,
+                                             self.config.fence_margin_m,
+                                             getattr(self.link, "companion_system_id", None),
+                                             self.config.param_timeout_s)
+        self.autopilot_fence, self.companion_loss = judgement.autopilot_fence, judgement.companion_loss
+        for kind, text in judgement.events:
+            self._event(kind, text)
+        if judgement.refusal is not None:
+            raise MissionAborted(judgement.refusal)
 
     def _set_mode(self, mode: str) -> None:
         """MAV_CMD_DO_SET_MODE for ``mode`` (the autopilot's own numbers), done once the heartbeat shows it."""

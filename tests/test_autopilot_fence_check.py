@@ -7,6 +7,7 @@ from test_runner_autopilots import events, fly, outbound, policy, states  # noqa
 from test_runner import small_mission
 
 from autonomy.autopilot_fence import fence_conflicts, judge_autopilot_fence, read_fence
+from autonomy.preflight import judge_autopilot_settings
 from autonomy.vehicle_link import VehicleLink
 
 HOME = small_mission().launch_point
@@ -52,6 +53,28 @@ def test_a_missing_fence_is_a_warning_with_the_setting_that_would_add_it():
     assert note == ("the autopilot's own geofence does not act (no limit set, on a breach: Hold): only the runner's "
                     "guard keeps the drone in the mission's area; GF_MAX_HOR_DIST=590 (GF_ACTION 2: Hold) would add "
                     "the autopilot's fence around it")
+
+
+def test_judging_the_settings_skips_what_was_not_read_and_stops_at_a_refusal():
+    """autonomy.preflight.judge_autopilot_settings, as the runner calls it with the parameters that arrived."""
+    mission, failsafes = small_mission(), {"COM_OBL_RC_ACT": 3, "COM_LOW_BAT_ACT": 0}
+    nothing = judge_autopilot_settings("PX4", {}, mission, HOME, 20.0, 1, 5.0)
+    assert (nothing.autopilot_fence, nothing.companion_loss, nothing.refusal) == (
+        {"checked": False, "reason": "its parameters were not read"},
+        {"checked": False, "reason": "its parameters were not read"}, None)
+    assert nothing.events == [
+        ("autopilot-fence", "not checked (its parameters were not read within 5 s)"),
+        ("warning", "what the autopilot does if this computer goes silent is not known: its failsafe parameters "
+                    "were not read")]
+    fine = judge_autopilot_settings("PX4", {**PX4_FENCE, "GF_MAX_HOR_DIST": 800.0, **failsafes}, mission, HOME, 20.0,
+                                    1, 5.0)
+    assert fine.refusal is None and fine.companion_loss["ends_the_flight"] is True
+    assert [kind for kind, _ in fine.events] == ["autopilot-fence"]  # Return on offboard loss: no warning
+    short = judge_autopilot_settings("PX4", {**PX4_FENCE, "GF_MAX_HOR_DIST": 400.0, **failsafes}, mission, HOME, 20.0,
+                                     1, 5.0)
+    assert short.refusal.startswith("refused before arming: the autopilot's own geofence would stop the search: "
+                                    "GF_MAX_HOR_DIST 400 m is short of the search")
+    assert short.companion_loss is None and short.events == []
 
 
 @pytest.mark.parametrize("autopilot, params, refusal", [
