@@ -32,11 +32,13 @@ best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distr
 docs/results/large-area.yaml, the 2 km square). ``--identify-factor F`` makes a close look costlier (another task
 design probe): identification becomes detection at F times the object's size instead of
 ``missions.belief_search.IDENTIFY_SIZE_FACTOR`` (1/6.4, Johnson's criteria), so a look hovers longer; the victim-known
-searcher's time to success shows what a look then costs.
+searcher's time to success shows what a look then costs. ``--neighbourhoods K,...`` flies greedy Bayes scoring each
+cell by the belief within K cells of it (``NeighbourhoodBelief``): is a less myopic scripted rule stronger, above
+all on the 2 km square where cells lie far apart?
 
 Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--generator FILE] [--decoys 1,4]
                                              [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--taus 3,10,30,100,300]
-                                             [--identify-factor 0.03125] [--no-patterns]
+                                             [--identify-factor 0.03125] [--neighbourhoods 1,2,4] [--no-patterns]
 """
 from __future__ import annotations
 
@@ -76,6 +78,33 @@ class TruthfulPlausibility:
         truth = np.zeros_like(core.plausibility)
         truth[np.arange(core.n), core.scen.primary_index] = 1.0
         return truth
+
+
+def box_sum(belief: np.ndarray, cells: int) -> np.ndarray:
+    """Each cell's belief summed with its neighbours' within ``cells`` cells (a square 2 * cells + 1 on a side,
+    clipped at the grid's edge), by an integral image; ``belief`` is (n, G, G)."""
+    grid = belief.shape[1]
+    integral = np.pad(belief, ((0, 0), (1, 0), (1, 0))).cumsum(axis=1).cumsum(axis=2)
+    low = np.clip(np.arange(grid) - cells, 0, grid)
+    high = np.clip(np.arange(grid) + cells + 1, 0, grid)
+    return (integral[:, high[:, None], high[None, :]] - integral[:, low[:, None], high[None, :]]
+            - integral[:, high[:, None], low[None, :]] + integral[:, low[:, None], low[None, :]])
+
+
+class NeighbourhoodBelief:
+    """The search batch as greedy Bayes sees it, with each cell's belief replaced by its neighbourhood's
+    (``box_sum``): greedy Bayes then flies to where the most probability lies within reach of a local search
+    rather than to the single best cell, a less myopic rule that may matter when cells are far apart."""
+
+    def __init__(self, core, cells: int):
+        self._core, self._cells = core, cells
+
+    def __getattr__(self, name):
+        return getattr(self._core, name)
+
+    @property
+    def belief(self) -> np.ndarray:
+        return box_sum(self._core.belief, self._cells)
 
 
 class KnownVictim(GreedyBayes):
@@ -156,6 +185,9 @@ def main() -> int:
     parser.add_argument("--taus", type=numbers, default=[],
                         help="comma-separated travel-time constants: the patterns become greedy Bayes with each (the "
                         "best-of line then bounds choosing tau per scenario)")
+    parser.add_argument("--neighbourhoods", type=numbers, default=[],
+                        help="comma-separated neighbourhood sizes in cells: greedy Bayes scoring each cell by the belief "
+                        "within that many cells of it (a less myopic choice)")
     parser.add_argument("--identify-factor", type=float, default=None,
                         help="identification is detection at this share of the object's size (default: the task's, "
                         "1/6.4); smaller makes a close look longer")
@@ -195,6 +227,9 @@ def main() -> int:
     skips = {f"greedy_bayes, investigate_plausibility {value:g}":
              functools.partial(GreedyBayes, settings=dataclasses.replace(greedy, investigate_plausibility=value))
              for value in args.thresholds}
+    skips.update({f"greedy_bayes, neighbourhood {cells:g} cells":
+                  lambda core, cells=int(cells): GreedyBayes(NeighbourhoodBelief(core, cells), greedy)
+                  for cells in args.neighbourhoods})
     oracles = {
         "greedy_bayes, oracle skip": lambda core: GreedyBayes(TruthfulPlausibility(core), oracle_skip),
         "victim known": lambda core: KnownVictim(core, greedy),

@@ -13,7 +13,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from decision_ceiling import KnownVictim, TruthfulPlausibility, fly_scripted  # noqa: E402
+from decision_ceiling import KnownVictim, NeighbourhoodBelief, TruthfulPlausibility, box_sum, fly_scripted  # noqa: E402,E501
 
 from missions.belief_search import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
@@ -105,3 +105,18 @@ def test_identify_factor_makes_a_close_look_longer_and_refuses_nonsense(tmp_path
         decision_ceiling.main()
     assert exit_info.value.code == 2
     assert "--identify-factor must be in (0, 1] (the task's is 1/6.4), got 0.0" in capsys.readouterr().err
+
+
+def test_the_neighbourhood_belief_sums_each_cells_square_clipped_at_the_edge():
+    belief = np.random.default_rng(0).random((2, 32, 32))
+    summed = box_sum(belief, 2)
+    for row, i, j in ((0, 10, 10), (1, 0, 0), (1, 31, 5)):
+        assert summed[row, i, j] == pytest.approx(belief[row, max(0, i - 2):i + 3, max(0, j - 2):j + 3].sum())
+    np.testing.assert_allclose(box_sum(belief, 0), belief)
+
+    class Core:
+        belief = np.zeros((1, 32, 32))
+        n = 1
+    Core.belief[0, 3, 3] = 1.0  # one certain cell: its whole 3 x 3 neighbourhood now holds it, the rest nothing
+    seen = NeighbourhoodBelief(Core(), 1)
+    assert seen.n == 1 and seen.belief[0, 2:5, 2:5].min() == 1.0 and seen.belief.sum() == 9.0
