@@ -13,7 +13,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from decision_ceiling import KnownVictim, NeighbourhoodBelief, TruthfulPlausibility, box_sum, fly_scripted  # noqa: E402,E501
+from decision_ceiling import KnownVictim, NeighbourhoodGreedy, TruthfulPlausibility, box_sum, fly_scripted  # noqa: E402,E501
 
 from missions.belief_search import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
@@ -114,9 +114,11 @@ def test_the_neighbourhood_belief_sums_each_cells_square_clipped_at_the_edge():
         assert summed[row, i, j] == pytest.approx(belief[row, max(0, i - 2):i + 3, max(0, j - 2):j + 3].sum())
     np.testing.assert_allclose(box_sum(belief, 0), belief)
 
-    class Core:
-        belief = np.zeros((1, 32, 32))
-        n = 1
-    Core.belief[0, 3, 3] = 1.0  # one certain cell: its whole 3 x 3 neighbourhood now holds it, the rest nothing
-    seen = NeighbourhoodBelief(Core(), 1)
-    assert seen.n == 1 and seen.belief[0, 2:5, 2:5].min() == 1.0 and seen.belief.sum() == 9.0
+
+def test_the_neighbourhood_searcher_flies_to_the_best_cell_of_the_best_region_and_finds_victims():
+    """Flown on 40 val scenarios it finds victims about as often as greedy Bayes (a first version, which flew to the
+    region's centre and scored it again on arrival, hovered there and found almost none)."""
+    greedy = TUNED["greedy_bayes"]
+    metrics, _ = fly_scripted(lambda core: GreedyBayes(core, greedy), "val", EPISODES)
+    region, _ = fly_scripted(lambda core: NeighbourhoodGreedy(core, greedy, 2), "val", EPISODES)
+    assert region["success_rate"] >= metrics["success_rate"] - 0.15 and region["success_rate"] >= 0.6

@@ -7,7 +7,11 @@ file names), and HRL-SAC runs also ``--constant-goal TrackObject`` (``RUN/eval_S
 val the earlier ``--out RUN/eval_val_track.json`` is read too). The learned - TrackObject difference is paired:
 the same scenarios and detection draws.
 
-Usage: python docs/results/val_summary.py SWEEP_DIR [SWEEP_DIR ...] [--split val|test] [--out FILE.json]
+With ``--scenarios NAME`` the evaluations of another scenario distribution are read (the name ``hrlsac evaluate
+--generator FILE`` gave them, e.g. ``generator-large-area`` for the 2 km square: ``RUN/eval_test_NAME.json`` ...).
+
+Usage: python docs/results/val_summary.py SWEEP_DIR [SWEEP_DIR ...] [--split val|test] [--scenarios NAME]
+                                          [--out FILE.json]
 """
 from __future__ import annotations
 
@@ -26,12 +30,13 @@ def mean_t95(values: list[float]) -> list[float]:
     return [round(mean, 4), round(low, 4), round(high, 4)]
 
 
-def run_row(run: pathlib.Path, split: str) -> dict:
-    env = json.loads((run / f"eval_{split}.json").read_text())
-    flight = json.loads((run / f"eval_{split}_flight.json").read_text())
+def run_row(run: pathlib.Path, split: str, scenarios: str = "") -> dict:
+    prefix = f"eval_{split}_{scenarios}" if scenarios else f"eval_{split}"
+    env = json.loads((run / f"{prefix}.json").read_text())
+    flight = json.loads((run / f"{prefix}_flight.json").read_text())
     row = {"success": env["success_rate"], "ran_dry": env["ran_dry_rate"],
            "success_runner_rules": flight["success_rate"]}
-    track_files = [run / f"eval_{split}_goal-TrackObject.json", run / f"eval_{split}_track.json"]
+    track_files = [run / f"{prefix}_goal-TrackObject.json", run / f"{prefix}_track.json"]
     track_file = next((f for f in track_files if f.exists()), None)
     if track_file is not None:
         track = json.loads(track_file.read_text())
@@ -43,9 +48,10 @@ def run_row(run: pathlib.Path, split: str) -> dict:
     return row
 
 
-def sweep_summary(sweep: pathlib.Path, split: str) -> dict:
-    runs = sorted(p for p in sweep.iterdir() if (p / f"eval_{split}.json").exists())
-    seeds = {json.loads((run / "config.json").read_text())["seed"]: run_row(run, split) for run in runs}
+def sweep_summary(sweep: pathlib.Path, split: str, scenarios: str = "") -> dict:
+    prefix = f"eval_{split}_{scenarios}" if scenarios else f"eval_{split}"
+    runs = sorted(p for p in sweep.iterdir() if (p / f"{prefix}.json").exists())
+    seeds = {json.loads((run / "config.json").read_text())["seed"]: run_row(run, split, scenarios) for run in runs}
     rows = list(seeds.values())
     summary = {"seeds": {str(seed): row for seed, row in sorted(seeds.items())},
                "success_mean_t95": mean_t95([r["success"] for r in rows]),
@@ -61,9 +67,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sweeps", nargs="+", type=pathlib.Path, help="sweep folders (hrlsac sweep --out)")
     parser.add_argument("--split", choices=["val", "test"], default="val", help="the split evaluated (default val)")
+    parser.add_argument("--scenarios", default="",
+                        help="the evaluations of another distribution, by the name in their files (generator-NAME)")
     parser.add_argument("--out", type=pathlib.Path, help="also write the summary to this JSON file")
     args = parser.parse_args()
-    summary = {"split": args.split, **{sweep.name: sweep_summary(sweep, args.split) for sweep in args.sweeps}}
+    summary = {"split": args.split, "scenarios": args.scenarios or "the split's own",
+               **{sweep.name: sweep_summary(sweep, args.split, args.scenarios) for sweep in args.sweeps}}
     print(json.dumps(summary, indent=2))
     if args.out:
         write_json_atomic(args.out, summary)
