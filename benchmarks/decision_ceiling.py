@@ -51,7 +51,6 @@ import numpy as np
 from common import results_file, write_report
 
 import missions.belief_search
-from missions import goals as goal_logic
 from missions.belief_search import TARGET_SLOTS
 from missions.coverage import GRID_SIZE
 from missions.generator import TASK_V1
@@ -103,27 +102,15 @@ class NeighbourhoodGreedy(GreedyBayes):
         super().__init__(core, settings)
         self.cells = cells
 
-    def search_point(self, fresh: np.ndarray) -> np.ndarray:
-        core, flight, grid, k = self.core, self.core.flight, GRID_SIZE, self.cells
-        north, east = goal_logic.cell_centres(core.scen.area, grid)
-        north, east = north + core.belief_offset[:, 0:1], east + core.belief_offset[:, 1:2]
-        flat, index = core.belief.reshape(core.n, -1), np.arange(core.n)
-        current = np.stack([north[index, self.cell // grid], east[index, self.cell % grid]], axis=1)
-        reached = np.hypot(*(current - core.position).T) <= flight.reach_radius_m
-        searched = flat[index, self.cell] < 0.5 * self.cell_belief
-        rows = np.flatnonzero(fresh | (self.cell < 0) | reached | searched)
-        for row in rows:  # few per step: a plain loop reads more easily than the batched form
-            travel_s = np.hypot(north[row][:, None] - core.position[row, 0],
-                                east[row][None, :] - core.position[row, 1]) / flight.max_speed_mps
-            mass = box_sum(core.belief[row][None], k)[0]
-            score = np.log(np.maximum(mass, 1e-300)) - np.log(travel_s + self.settings.travel_time_s)
-            i, j = np.unravel_index(score.argmax(), score.shape)
-            box = core.belief[row, max(0, i - k):i + k + 1, max(0, j - k):j + k + 1]
-            bi, bj = np.unravel_index(box.argmax(), box.shape)
-            self.cell[row] = (max(0, i - k) + bi) * grid + max(0, j - k) + bj
-            self.cell_belief[row] = flat[row, self.cell[row]]
-            current[row] = (north[row, self.cell[row] // grid], east[row, self.cell[row] % grid])
-        return current
+    def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
+        belief, k = self.core.belief[rows], self.cells
+        score = np.log(np.maximum(box_sum(belief, k), 1e-300)) - np.log(self.travel_s(rows, north, east)
+                                                                         + self.settings.travel_time_s)
+        centre_i, centre_j = np.divmod(score.reshape(len(rows), -1).argmax(axis=1), GRID_SIZE)
+        cells = np.arange(GRID_SIZE)
+        inside = ((np.abs(cells[None, :, None] - centre_i[:, None, None]) <= k)
+                  & (np.abs(cells[None, None, :] - centre_j[:, None, None]) <= k))
+        return np.where(inside, belief, -1.0).reshape(len(rows), -1).argmax(axis=1)  # the region's best cell
 
 
 class KnownVictim(GreedyBayes):

@@ -97,9 +97,12 @@ def sys_status(v: TelemetrySource) -> mavlink.MAVLink_message:
         health &= ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
     if v.autopilot.prearm_failure(v.state) is not None:
         health &= ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
-    if not v.autopilot.battery_monitored:  # ArduPilot's send_sys_status without a monitor: 0 V, -1 A, -1 %
-        present = SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-        return mavlink.MAVLink_sys_status_message(present, present, health & present, 150, 0, -1, -1,
+    if not v.autopilot.battery_monitored:
+        # ArduPilot without a battery monitor (GCS_Common.cpp, update_sensor_status_flags: the battery bit is always
+        # present, enabled only with an instance, healthy only when healthy; send_sys_status: voltage() * 1000 = 0,
+        # current and remaining -1 unless the battery is healthy)
+        enabled = SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+        return mavlink.MAVLink_sys_status_message(SENSORS, enabled, health & enabled, 150, 0, -1, -1,
                                                   0, 0, 0, 0, 0, 0)
     volts, amps, fraction = battery_reading(v)
     return mavlink.MAVLink_sys_status_message(SENSORS, SENSORS, health, 150, int(volts * 1000), int(amps * 100),

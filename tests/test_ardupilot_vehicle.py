@@ -443,7 +443,7 @@ def test_battery_failsafe_low_voltage_for_batt_low_timer_returns():
 
 def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_failsafe_off():
     """AP_BattMonitor_Params.cpp: BATT_MONITOR carries AP_PARAM_FLAG_ENABLE, so at 0 the other BATT_* are not listed,
-    not answered and not settable, SYS_STATUS reports no battery (0 V, -1 A, -1 %) and nothing fails safe on it."""
+    not answered and not settable, SYS_STATUS reports no battery (0 V, -1 A, -1 %, not enabled) and nothing fails safe on it."""
     pilot = airborne({"BATT_MONITOR": 0, "BATT_LOW_VOLT": 16.75, "BATT_FS_LOW_ACT": 2})  # monitored: RTL within 60 s
     before = len(pilot.received)
     pilot.mav.param_request_list_send(1, 1)
@@ -463,7 +463,9 @@ def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_fails
     assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_SYS_STATUS) == ACCEPTED
     status = last(pilot, "SYS_STATUS")
     assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (0, -1, -1)
-    assert not status.onboard_control_sensors_present & mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+    battery = mavlink.MAV_SYS_STATUS_SENSOR_BATTERY  # present, but neither enabled nor healthy (GCS_Common.cpp)
+    assert status.onboard_control_sensors_present & battery
+    assert not status.onboard_control_sensors_enabled & battery and not status.onboard_control_sensors_health & battery
     assert pilot.vehicle.autopilot.battery_failsafe == 0 and pilot.vehicle.autopilot.mode is CopterMode.GUIDED
     assert pilot.set_param("BATT_MONITOR", 4) == 4  # visible again, with the kept value
     pilot.mav.param_request_read_send(1, 1, b"BATT_FS_LOW_ACT", -1)

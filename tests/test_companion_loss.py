@@ -6,8 +6,9 @@ import pytest
 from autonomy.companion_loss import (ARDUPILOT_BATTERY, ARDUPILOT_REQUIRED, companion_loss_params,
                                      judge_companion_loss)
 
-ARDUPILOT_DEFAULTS = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_MONITOR": 4, "BATT_FS_LOW_ACT": 0, "BATT_LOW_VOLT": 10.5,
-                      "BATT_LOW_MAH": 0, "BATT_FS_CRT_ACT": 0, "BATT_CRT_VOLT": 0, "BATT_CRT_MAH": 0}
+ARDUPILOT_DEFAULTS = {"FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "BATT_MONITOR": 4, "BATT_FS_LOW_ACT": 0,
+                      "BATT_LOW_VOLT": 10.5, "BATT_LOW_MAH": 0, "BATT_FS_CRT_ACT": 0, "BATT_CRT_VOLT": 0,
+                      "BATT_CRT_MAH": 0}
 
 
 @pytest.mark.parametrize("obl, battery, ends", [

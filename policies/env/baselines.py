@@ -230,13 +230,23 @@ class GreedyBayes(ScriptedSearch):
         choose = fresh | (self.cell < 0) | reached | searched
         if choose.any():
             rows = np.flatnonzero(choose)
-            travel_s = np.hypot(north[rows, :, None] - core.position[rows, 0, None, None],
-                                east[rows, None, :] - core.position[rows, 1, None, None]) / flight.max_speed_mps
-            score = np.log(np.maximum(core.belief[rows], 1e-300)) - np.log(travel_s + self.settings.travel_time_s)
-            best = score.reshape(len(rows), -1).argmax(axis=1)
+            best = self.choose_cells(rows, north, east)
             self.cell[rows], self.cell_belief[rows] = best, flat[rows, best]
             current[rows] = np.stack([north[rows, best // grid], east[rows, best % grid]], axis=1)
         return current
+
+    def travel_s(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
+        """(len(rows), G, G): the flight time at full speed from each of these slots to every cell centre."""
+        core = self.core
+        return np.hypot(north[rows, :, None] - core.position[rows, 0, None, None],
+                        east[rows, None, :] - core.position[rows, 1, None, None]) / core.flight.max_speed_mps
+
+    def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
+        """The flat index of the cell each of these slots flies to next: the most belief per travel time."""
+        belief = self.core.belief[rows]
+        score = np.log(np.maximum(belief, 1e-300)) - np.log(self.travel_s(rows, north, east)
+                                                            + self.settings.travel_time_s)
+        return score.reshape(len(rows), -1).argmax(axis=1)
 
 
 class RandomSearch:
