@@ -34,11 +34,15 @@ design probe): identification becomes detection at F times the object's size ins
 ``missions.belief_search.IDENTIFY_SIZE_FACTOR`` (1/6.4, Johnson's criteria), so a look hovers longer; the victim-known
 searcher's time to success shows what a look then costs. ``--neighbourhoods K,...`` flies greedy Bayes scoring each
 region by the belief within K cells of a cell, then flying to the region's best cell (``NeighbourhoodGreedy``): is
-a less myopic scripted rule stronger, above all on the 2 km square where cells lie far apart?
+a less myopic scripted rule stronger, above all on the 2 km square where cells lie far apart? ``--rollouts H,...``
+flies greedy Bayes that chooses each next cell by lookahead in the belief over H seconds (``LookaheadBayes``, a
+planner on the crew's model; ``--rollout-options`` cells tried per choice), and ``--stream k`` flies detection stream
+k instead of the task's draws, so that a searcher's gain can be paired with greedy Bayes' stream by stream.
 
 Usage: python benchmarks/decision_ceiling.py [--episodes 500] [--split val] [--generator FILE] [--decoys 1,4]
                                              [--decoy-spread 2.5] [--thresholds 0.1,0.3] [--taus 3,10,30,100,300]
-                                             [--identify-factor 0.03125] [--neighbourhoods 1,2,4] [--no-patterns]
+                                             [--identify-factor 0.03125] [--neighbourhoods 1,2,4]
+                                             [--rollouts 60,120] [--rollout-options 6] [--stream 0] [--no-patterns]
 """
 from __future__ import annotations
 
@@ -59,7 +63,7 @@ from missions.scenario import CATEGORIES
 from missions.search import OBJECT_SIZE_M
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, ParallelTrack
+from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
 
@@ -79,17 +83,6 @@ class TruthfulPlausibility:
         truth = np.zeros_like(core.plausibility)
         truth[np.arange(core.n), core.scen.primary_index] = 1.0
         return truth
-
-
-def box_sum(belief: np.ndarray, cells: int) -> np.ndarray:
-    """Each cell's belief summed with its neighbours' within ``cells`` cells (a square 2 * cells + 1 on a side,
-    clipped at the grid's edge), by an integral image; ``belief`` is (n, G, G)."""
-    grid = belief.shape[1]
-    integral = np.pad(belief, ((0, 0), (1, 0), (1, 0))).cumsum(axis=1).cumsum(axis=2)
-    low = np.clip(np.arange(grid) - cells, 0, grid)
-    high = np.clip(np.arange(grid) + cells + 1, 0, grid)
-    return (integral[:, high[:, None], high[None, :]] - integral[:, low[:, None], high[None, :]]
-            - integral[:, high[:, None], low[None, :]] + integral[:, low[:, None], low[None, :]])
 
 
 class NeighbourhoodGreedy(GreedyBayes):
@@ -194,9 +187,15 @@ def main() -> int:
     parser.add_argument("--neighbourhoods", type=numbers, default=[],
                         help="comma-separated neighbourhood sizes in cells: greedy Bayes scoring each cell by the belief "
                         "within that many cells of it (a less myopic choice)")
+    parser.add_argument("--rollouts", type=numbers, default=[],
+                        help="comma-separated lookahead horizons (s): greedy Bayes choosing each next cell by "
+                        "rollouts in the belief (policies.env.baselines.LookaheadBayes; greedy Bayes' tuned settings)")
+    parser.add_argument("--rollout-options", type=int, default=6, help="cells each lookahead tries (default 6)")
     parser.add_argument("--identify-factor", type=float, default=None,
                         help="identification is detection at this share of the object's size (default: the task's, "
                         "1/6.4); smaller makes a close look longer")
+    parser.add_argument("--stream", type=int, default=0,
+                        help="detection stream to fly (0: the task's draws; k > 0 the same scenarios with other draws)")
     parser.add_argument("--no-patterns", action="store_true", help="skip the patterns and the best-of lines")
     parser.add_argument("--out", default=results_file("decision_ceiling.json"))
     args = parser.parse_args()
@@ -236,19 +235,26 @@ def main() -> int:
     skips.update({f"greedy_bayes, neighbourhood {cells:g} cells":
                   lambda core, cells=int(cells): NeighbourhoodGreedy(core, greedy, cells)
                   for cells in args.neighbourhoods})
+    skips.update({f"greedy_bayes, lookahead {horizon:g} s":
+                  functools.partial(LookaheadBayes, settings=dataclasses.replace(
+                      greedy, lookahead_s=horizon, lookahead_options=args.rollout_options))
+                  for horizon in args.rollouts})
     oracles = {
         "greedy_bayes, oracle skip": lambda core: GreedyBayes(TruthfulPlausibility(core), oracle_skip),
         "victim known": lambda core: KnownVictim(core, greedy),
     }
+    if args.stream and not args.no_patterns:
+        parser.error("--stream flies one other detection stream: use it with --no-patterns (the best-of lines use "
+                     "streams 0 to 4 themselves)")
     report = {"command": " ".join(["python benchmarks/decision_ceiling.py"] + sys.argv[1:]), "split": args.split,
-              "episodes": args.episodes, "generator_file": args.generator,
+              "episodes": args.episodes, "stream": args.stream, "generator_file": args.generator,
               "decoys": [generator.decoys_min, generator.decoys_max],
               "decoy_spread_sigmas": generator.decoy_spread_sigmas,
               "identify_size_factor": missions.belief_search.IDENTIFY_SIZE_FACTOR,
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
     for name, make in {**patterns, **skips, **oracles}.items():
-        metrics, scen = fly_scripted(make, args.split, args.episodes, generator=generator)
+        metrics, scen = fly_scripted(make, args.split, args.episodes, args.stream, generator)
         success = np.array(metrics["per_episode"]["success"], dtype=bool)
         if name in patterns:
             found.append(success)

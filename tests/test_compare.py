@@ -245,7 +245,7 @@ def test_v1_rows_scripted_streams_constant_goals_iqm_and_verdicts(tmp_path):
     report = (tmp_path / "report" / "report.md").read_text()
     assert "## SarSearch-v1: every method on the same scenarios" in report
     scripted = {row["baseline"]: row for row in summary["baselines"]}
-    assert set(scripted) == {"random", "expanding_square", "parallel_track", "greedy_bayes"}
+    assert set(scripted) == {"random", "expanding_square", "parallel_track", "greedy_bayes", "lookahead_bayes"}
     assert all(row["seeds"] == 2 and row["episodes"] == 2 * EPISODES for row in scripted.values())
     assert [row["label"] for row in summary["constant_goals"]] == ["HRL-SAC's low level, always TrackObject"]
     assert summary["constant_goals"][0]["success_mean"] == pytest.approx(0.2)

@@ -17,7 +17,8 @@ from decision_ceiling import KnownVictim, NeighbourhoodGreedy, TruthfulPlausibil
 
 from missions.belief_search import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
-from policies.env.baselines import TUNED, GreedyBayes  # noqa: E402
+from missions.mission import FlightSettings  # noqa: E402
+from policies.env.baselines import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
 
 EPISODES = 40
 MANY_DECOYS = dataclasses.replace(TASK_V1, decoys_min=6, decoys_max=10, decoy_spread_sigmas=1.0)
@@ -127,7 +128,6 @@ def test_the_neighbourhood_searcher_finds_victims_about_as_often_as_greedy_bayes
 def test_the_region_rule_goes_where_much_probability_lies_together_and_flies_to_its_best_cell():
     """One cell of 0.2 near the drone against nine cells of 0.09-0.1 (0.82 together) farther off: greedy Bayes takes
     the lone cell, the region rule (K = 1) the region, and within it the best cell, not the region's centre."""
-    from missions.mission import FlightSettings
 
     class Core:
         n, position, flight = 1, np.zeros((1, 2)), FlightSettings()
@@ -141,3 +141,46 @@ def test_the_region_rule_goes_where_much_probability_lies_together_and_flies_to_
         searcher.core, searcher.settings, searcher.cells = Core(), TUNED["greedy_bayes"], 1
         chosen[name] = divmod(int(searcher.choose_cells(np.array([0]), centres, centres)[0]), 32)
     assert chosen == {"greedy": (5, 5), "region": (21, 22)}
+
+
+def lone_cell_against_a_region():
+    """A real SarSearch-v1 search (val scenario 0) whose belief is replaced: one cell of 0.1 four cells west of the
+    drone, against nine cells of 0.09 (0.81 together) eight cells north-east; the drone at a cell centre."""
+    from missions.goals import cell_centres
+    from policies.evaluation.episodes import episode_batch
+
+    core = episode_batch("val", 1, FlightSettings(), goal_conditioned=False, task="SarSearch-v1")
+    north, east = cell_centres(core.scen.area, 32)
+    core.belief[:] = 0.0
+    core.belief[0, 10, 6] = 0.1
+    core.belief[0, 17:20, 17:20] = 0.09
+    core.belief_offset[:] = 0.0
+    core.position[0] = north[0, 10], east[0, 10]
+    return core, north, east
+
+
+def test_the_lookahead_crosses_to_the_region_that_greedy_bayes_leaves_for_later():
+    """Greedy Bayes takes the lone near cell; the lookahead, trying both in the belief, flies to the region (within
+    45 s only one of the two can be searched, and the region holds more), and chooses the same with the hidden
+    objects moved anywhere: its rollouts read the belief, never the truth."""
+    core, north, east = lone_cell_against_a_region()
+    greedy, rows = TUNED["greedy_bayes"], np.array([0])
+    assert divmod(int(GreedyBayes(core, greedy).choose_cells(rows, north, east)[0]), 32) == (10, 6)
+    planner = LookaheadBayes(core, dataclasses.replace(greedy, lookahead_s=45.0, lookahead_options=6))
+    chosen = divmod(int(planner.choose_cells(rows, north, east)[0]), 32)
+    assert chosen[0] in range(17, 20) and chosen[1] in range(17, 20)
+    before = core.belief.copy()
+    core.targets[:] = core.scen.targets[:] = core.scen.datum[:, None, :] + 300.0
+    assert divmod(int(planner.choose_cells(rows, north, east)[0]), 32) == chosen
+    np.testing.assert_array_equal(core.belief, before)  # the rollouts fly copies
+
+
+def test_a_lookahead_with_one_option_flies_exactly_as_greedy_bayes():
+    """With a single option (greedy Bayes' own best cell) the planner is greedy Bayes, step for step."""
+    greedy = TUNED["greedy_bayes"]
+    plain, _ = fly_scripted(lambda core: GreedyBayes(core, greedy), "val", 12)
+    single, _ = fly_scripted(lambda core: LookaheadBayes(core, dataclasses.replace(greedy, lookahead_options=1)),
+                             "val", 12)
+    assert single["per_episode"] == plain["per_episode"]
+    with pytest.raises(ValueError, match="lookahead_options"):
+        dataclasses.replace(greedy, lookahead_options=0)

@@ -26,7 +26,8 @@ from policies.reports.figures import colour, new_figure, save_figure
 from policies.reports.runs import CompareError, Run
 
 SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bounded, repeated)",
-                   "parallel_track": "Parallel track (bounded, repeated)", "greedy_bayes": "Greedy Bayesian"}
+                   "parallel_track": "Parallel track (bounded, repeated)", "greedy_bayes": "Greedy Bayesian",
+                   "lookahead_bayes": "Greedy Bayesian with lookahead"}
 
 
 def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, environment: dict,
