@@ -461,6 +461,10 @@ def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_fails
     assert pilot.vehicle.params["BATT_FS_LOW_ACT"] == 2  # the hidden value is kept for when the monitor returns
     fly(pilot, 60.0)
     assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_SYS_STATUS) == ACCEPTED
+    before = len(pilot.received)  # GCS_Common.cpp handle_command_request_message: ACCEPTED, then nothing to send
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS) == ACCEPTED
+    fly(pilot, 0.5)
+    assert not [m for m in pilot.received[before:] if m.get_type() == "BATTERY_STATUS"]
     status = last(pilot, "SYS_STATUS")
     assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (0, -1, -1)
     battery = mavlink.MAV_SYS_STATUS_SENSOR_BATTERY  # present, but neither enabled nor healthy (GCS_Common.cpp)
@@ -489,6 +493,8 @@ def test_parameters_are_floats_with_ardupilot_types():
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
     assert not version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     assert version.flight_sw_version >> 24 == 4
+    # GCS_Common.cpp handle_command_request_message: an id with no ap_message is FAILED (PX4 says DENIED)
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, 65000) == mavlink.MAV_RESULT_FAILED
 
 
 def rate(pilot: LockstepPilot, msg_type: str, seconds: float) -> float:
@@ -532,6 +538,20 @@ def test_home_position_when_set_at_arming_and_on_request_never_streamed():
     pilot.set_mode(CopterMode.GUIDED)
     pilot.command(ARM, 1)
     assert any(m.get_type() == "HOME_POSITION" for m in pilot.received[seen:])  # re-set where it arms
+
+
+def test_no_home_yet_means_an_accepted_request_and_nothing_sent(monkeypatch):
+    """GCS_Common.cpp: REQUEST_MESSAGE HOME_POSITION is ACCEPTED and send_home_position() returns before home is set
+    (GET_HOME_POSITION says FAILED then)."""
+    pilot = copter()
+    suite = type(pilot.vehicle.sensors)
+    update = suite.update
+    monkeypatch.setattr(suite, "update", lambda self, *args: (update(self, *args), setattr(self, "gps", None)))
+    fly(pilot, 0.1)  # a receiver without a fix
+    seen = len(pilot.received)
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HOME_POSITION) == ACCEPTED
+    assert pilot.command(mavlink.MAV_CMD_GET_HOME_POSITION) == FAILED
+    assert not [m for m in pilot.received[seen:] if m.get_type() == "HOME_POSITION"]
 
 
 def test_flight_status_is_the_neutral_view():

@@ -101,11 +101,14 @@ def test_identify_factor_makes_a_close_look_longer_and_refuses_nonsense(tmp_path
         steps[factor] = report["results"]["victim known"]["steps_to_success"]["p50"]
     assert steps[0.0078125] > steps[None] + 10  # a look of about 20 more seconds at the least
 
-    monkeypatch.setattr(sys, "argv", ["decision_ceiling.py", "--identify-factor", "0"])
-    with pytest.raises(SystemExit) as exit_info:
-        decision_ceiling.main()
-    assert exit_info.value.code == 2
-    assert "--identify-factor must be in (0, 1] (the task's is 1/6.4), got 0.0" in capsys.readouterr().err
+    for argv, message in ((["--identify-factor", "0"],
+                           "--identify-factor must be in (0, 1] (the task's is 1/6.4), got 0.0"),
+                          (["--stream", "2"], "--stream flies one other detection stream: use it with --no-patterns")):
+        monkeypatch.setattr(sys, "argv", ["decision_ceiling.py", *argv])
+        with pytest.raises(SystemExit) as exit_info:
+            decision_ceiling.main()
+        assert exit_info.value.code == 2
+        assert message in capsys.readouterr().err
 
 
 def test_the_neighbourhood_belief_sums_each_cells_square_clipped_at_the_edge():

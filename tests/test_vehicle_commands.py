@@ -187,6 +187,17 @@ def test_message_interval_request_message_and_capabilities(pilot):
     assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HOME_POSITION) == ACCEPTED
     home = next(m for m in pilot.received[before:] if m.get_type() == "HOME_POSITION")
     assert home.latitude == round(pilot.vehicle.config.home.lat_deg * 1e7)
+    # mavlink_receiver.cpp handle_request_message_command: nothing sent (no such stream; no valid home) is DENIED
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, 65000) == DENIED
+    suite = type(pilot.vehicle.sensors)
+    update = suite.update
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(suite, "update", lambda self, *args: (update(self, *args), setattr(self, "gps", None)))
+        pilot.step()  # a receiver without a fix
+        before = len(pilot.received)
+        assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HOME_POSITION) == DENIED
+        assert not [m for m in pilot.received[before:] if m.get_type() == "HOME_POSITION"]
+    pilot.step()  # the fix is back
     before = len(pilot.received)
     assert pilot.command(mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1) == ACCEPTED
     assert any(m.get_type() == "AUTOPILOT_VERSION" for m in pilot.received[before:])
