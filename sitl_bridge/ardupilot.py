@@ -103,6 +103,11 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
     def battery_monitored(self) -> bool:
         return self.params["BATT_MONITOR"] != 0
 
+    @property
+    def battery_healthy(self) -> bool:
+        # GCS_Common.cpp update_sensor_status_flags: healthy only while battery.healthy() && !has_failsafed()
+        return self.battery_monitored and self.battery_failsafe == 0
+
     def battery_charge_state(self, fraction: float) -> int:
         return (mavlink.MAV_BATTERY_CHARGE_STATE_OK, mavlink.MAV_BATTERY_CHARGE_STATE_LOW,
                 mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL)[self.battery_failsafe]

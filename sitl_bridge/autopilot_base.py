@@ -183,6 +183,11 @@ class AutopilotBase:
         so (-1) and there is no battery failsafe."""
         return True
 
+    @property
+    def battery_healthy(self) -> bool:
+        """SYS_STATUS's battery health bit (ArduPilot clears it once the battery failsafe has triggered)."""
+        return True
+
     def _zoom(self, zoom_type: int, value: float, now: float) -> int:
         """MAV_CMD_SET_CAMERA_ZOOM: zoom range (0-100 %) or steps of 10 %."""
         if zoom_type == mavlink.ZOOM_TYPE_RANGE and 0.0 <= value <= 100.0:

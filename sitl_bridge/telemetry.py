@@ -104,6 +104,8 @@ def sys_status(v: TelemetrySource) -> mavlink.MAVLink_message:
         enabled = SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
         return mavlink.MAVLink_sys_status_message(SENSORS, enabled, health & enabled, 150, 0, -1, -1,
                                                   0, 0, 0, 0, 0, 0)
+    if not v.autopilot.battery_healthy:
+        health &= ~mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
     volts, amps, fraction = battery_reading(v)
     return mavlink.MAVLink_sys_status_message(SENSORS, SENSORS, health, 150, int(volts * 1000), int(amps * 100),
                                               int(round(fraction * 100)), 0, 0, 0, 0, 0, 0)

@@ -434,11 +434,18 @@ def test_no_gcs_failsafe_by_default():
 
 def test_battery_failsafe_low_voltage_for_batt_low_timer_returns():
     pilot = airborne({"BATT_LOW_VOLT": 16.75, "BATT_FS_LOW_ACT": 2})
+    battery = mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_SYS_STATUS) == ACCEPTED
+    assert last(pilot, "SYS_STATUS").onboard_control_sensors_health & battery
     pilot.wait_for(lambda: pilot.vehicle.autopilot.battery_failsafe == 1, 60, "battery failsafe")
     low = next(t for t in texts(pilot) if t.startswith("Battery 1 is low"))
     assert low.endswith("mAh") and "V used" in low and "Battery Failsafe" in texts(pilot)
     assert pilot.vehicle.autopilot.mode is CopterMode.RTL
     assert last(pilot, "HEARTBEAT").system_status == mavlink.MAV_STATE_CRITICAL
+    # GCS_Common.cpp update_sensor_status_flags: the battery is healthy only while it has not failed safe
+    assert pilot.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_SYS_STATUS) == ACCEPTED
+    status = last(pilot, "SYS_STATUS")
+    assert status.onboard_control_sensors_enabled & battery and not status.onboard_control_sensors_health & battery
 
 
 def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_failsafe_off():
