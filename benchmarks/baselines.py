@@ -6,7 +6,9 @@ coverage and the time-to-find distribution (steps to first detection of the vict
 them to benchmarks/results/baselines.json. Targets: random <= 10 % success, the best scripted searcher >= 60 %.
 ``--only NAME[,NAME]`` flies only those searchers, ``--streams N`` each over N detection streams (the same scenarios, other draws;
 ``hrlsac compare``'s scripted rows use 5) with the streams' mean and t 95 % interval, and ``--generator FILE`` draws
-the scenarios from a generator config file (e.g. docs/results/large-area.yaml, the 2 km square).
+the scenarios from a generator config file (e.g. docs/results/large-area.yaml, the 2 km square). With several
+searchers each is also compared with the first, paired on the same scenarios and streams, with a 95 % interval from
+a bootstrap over the scenarios (``policies.evaluation.aggregate.paired_scenario_bootstrap``).
 
 Usage: python benchmarks/baselines.py [--episodes 500] [--split test] [--task SarSearch-v1] [--only NAMES]
                                       [--streams 1] [--generator FILE]
@@ -22,6 +24,7 @@ from common import results_file, write_report
 from policies.cli.evaluate import read_generator_config
 from policies.env.baselines import BASELINES
 from policies.env.baselines_v0 import BASELINES_V0
+from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.baselines import run_baseline
 from policies.evaluation.stats import t_interval
 
@@ -47,7 +50,7 @@ def main() -> int:
         environment = {"generator": read_generator_config(args.generator)} if args.generator else {}
     except ValueError as exc:
         parser.error(str(exc))
-    results, streams = [], {}
+    results, streams, successes = [], {}, {}
     for name in chosen:
         for stream in range(args.streams):
             start = time.perf_counter()
@@ -55,12 +58,22 @@ def main() -> int:
             result["wall_s"] = time.perf_counter() - start
             results.append(result)
             streams.setdefault(name, []).append(result["success_rate"])
+            successes.setdefault(name, []).append(result["per_episode"]["success"])
             print_result(name if args.streams == 1 else f"{name}, stream {stream}", result)
     summary = {name: {"per_stream": rates, "mean": t_interval(rates)[0], "t95": t_interval(rates)[2]}
                for name, rates in streams.items() if len(rates) > 1}
+    first = chosen[0]
+    for name in chosen[1:]:  # each against the first, paired on the same scenarios and streams
+        mean, low, high = paired_scenario_bootstrap(successes[name], successes[first])
+        summary.setdefault(name, {})[f"minus_{first}"] = {"mean": mean, "scenario_bootstrap95": [low, high]}
     for name, row in summary.items():
-        print(f"{name}: mean over {len(row['per_stream'])} streams {row['mean']:.1%} "
-              f"[{row['t95'][0]:.1%}, {row['t95'][1]:.1%}]")
+        if "per_stream" in row:
+            print(f"{name}: mean over {len(row['per_stream'])} streams {row['mean']:.1%} "
+                  f"[{row['t95'][0]:.1%}, {row['t95'][1]:.1%}]")
+        if f"minus_{first}" in row:
+            paired = row[f"minus_{first}"]
+            print(f"{name} - {first}: {paired['mean']:+.1%} (scenario bootstrap 95 % "
+                  f"[{paired['scenario_bootstrap95'][0]:+.1%}, {paired['scenario_bootstrap95'][1]:+.1%}])")
     write_report(args.out, {"split": args.split, "episodes": args.episodes, "generator_file": args.generator,
                             "streams": summary, "results": results})
     return 0

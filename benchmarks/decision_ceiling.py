@@ -64,6 +64,7 @@ from missions.search import OBJECT_SIZE_M
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
 from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
+from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
 
@@ -260,10 +261,16 @@ def main() -> int:
             found.append(success)
         report["results"][name] = {key: metrics[key] for key in ("success_rate", "ran_dry_rate", "returned_rate",
                                                                  "collision_rate", "steps_to_success")}
+        paired = ""
         if name == "greedy_bayes":
             report["results"][name].update(failure_split(metrics, scen))
+            greedy_success = success
+        else:  # paired with greedy Bayes on the same scenarios and draws; the interval resamples the scenarios
+            mean, low, high = paired_scenario_bootstrap(success, greedy_success)
+            report["results"][name]["minus_greedy_bayes"] = {"mean": mean, "scenario_bootstrap95": [low, high]}
+            paired = f"  vs greedy Bayes {100 * mean:+.1f} [{100 * low:+.1f}, {100 * high:+.1f}]"
         print(f"{name:34s} success {100 * metrics['success_rate']:5.1f} %  ran dry {100 * metrics['ran_dry_rate']:.1f} %"
-              f"  returned {100 * metrics['returned_rate']:.1f} %", flush=True)
+              f"  returned {100 * metrics['returned_rate']:.1f} %{paired}", flush=True)
     if args.no_patterns:
         write_report(args.out, report)
         return 0

@@ -42,6 +42,21 @@ def test_only_streams_and_generator_fly_what_was_asked(tmp_path, monkeypatch):
     assert run_baseline("greedy_bayes", "val", 6, stream=1)["per_episode"] != again["per_episode"]
 
 
+def test_each_searcher_is_paired_with_the_first(tmp_path, monkeypatch):
+    """With several searchers each after the first gets its paired difference from the first, on the same
+    scenarios, with a scenario-bootstrap interval around it."""
+    out = tmp_path / "paired.json"
+    assert run(monkeypatch, "--split", "val", "--episodes", "8", "--only", "greedy_bayes,random", "--out", str(out)) == 0
+    report = json.loads(out.read_text())
+    rates = {r["baseline"]: r["success_rate"] for r in report["results"]}
+    paired = report["streams"]["random"]["minus_greedy_bayes"]
+    assert rates["greedy_bayes"] > rates["random"]
+    assert paired["mean"] == pytest.approx(rates["random"] - rates["greedy_bayes"])
+    low, high = paired["scenario_bootstrap95"]
+    assert low <= paired["mean"] <= high
+    assert "greedy_bayes" not in report["streams"]  # one stream: no mean over streams, and no pair with itself
+
+
 def test_an_unknown_searcher_or_no_stream_is_one_line(monkeypatch, capsys, tmp_path):
     for argv, message in ((["--only", "greedy_bayes,greedy"], "--only: no scripted searcher 'greedy' on SarSearch-v1; "
                            "choose from random, expanding_square, parallel_track, greedy_bayes, lookahead_bayes"),
