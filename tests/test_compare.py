@@ -201,6 +201,8 @@ def test_errors_are_one_line_with_exit_code_2(runs, tmp_path, capsys):
     empty.mkdir()
     assert f"{empty}: no config.json" in _one_line_error(capsys, [str(hrl0), str(empty), "--out", out])
     assert "no such run folder" in _one_line_error(capsys, [str(tmp_path / "nope"), "--out", out])
+    err = _one_line_error(capsys, [str(hrl0), "--scripted", "greedy_bayes,greedy", "--out", out])
+    assert "--scripted: no scripted searcher 'greedy'; choose from random, expanding_square" in err
 
     (runs[("sac", 1)][0] / "eval_test.json").unlink()
     err = _one_line_error(capsys, [str(hrl0), str(runs[("sac", 1)][0]), "--out", out])
@@ -246,6 +248,8 @@ def test_v1_rows_scripted_streams_constant_goals_iqm_and_verdicts(tmp_path):
     assert "## SarSearch-v1: every method on the same scenarios" in report
     scripted = {row["baseline"]: row for row in summary["baselines"]}
     assert set(scripted) == {"random", "expanding_square", "parallel_track", "greedy_bayes", "lookahead_bayes"}
+    only = compare(paths, tmp_path / "only", split="test", progress=None, streams=1, scripted=["random"])
+    assert [row["baseline"] for row in only["baselines"]] == ["random"] and only["baselines"][0]["seeds"] == 1
     assert all(row["seeds"] == 2 and row["episodes"] == 2 * EPISODES for row in scripted.values())
     assert [row["label"] for row in summary["constant_goals"]] == ["HRL-SAC's low level, always TrackObject"]
     assert summary["constant_goals"][0]["success_mean"] == pytest.approx(0.2)

@@ -28,6 +28,9 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                         help="SarSearch-v1: compare the runs' evaluations under the mission runner's rules (hrlsac "
                              "evaluate --flight-rules: eval_SPLIT[_generator-NAME]_flight.json); the scripted "
                              "searchers fly their own rules either way")
+    parser.add_argument("--scripted", default=None, metavar="NAMES",
+                        help="SarSearch-v1: the scripted searchers to fly, comma-separated (default: all; "
+                             "lookahead_bayes, the strongest, takes about five times greedy_bayes' time)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
@@ -41,6 +44,15 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
             raise CompareError("--out DIR is required (the folder for the report and the figures)")
         if args.streams < 1:
             raise CompareError(f"--streams must be >= 1, got {args.streams}")
+        scripted = None
+        if args.scripted is not None:
+            from policies.env.baselines import BASELINES
+
+            scripted = [name.strip() for name in args.scripted.split(",") if name.strip()]
+            unknown = [name for name in scripted if name not in BASELINES]
+            if unknown or not scripted:
+                raise CompareError(f"--scripted: no scripted searcher {unknown[0] if unknown else args.scripted!r}; "
+                                   f"choose from {', '.join(BASELINES)}")
         generator = scenarios = None
         if args.generator is not None:
             from pathlib import Path
@@ -57,7 +69,7 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
         summary = compare(args.runs, args.out, split=args.split, episodes=args.episodes, evaluate=args.evaluate,
                           command=shlex.join(["hrlsac", "compare", *argv]),
                           progress=None if args.quiet else sys.stderr, streams=args.streams, generator=generator,
-                          scenarios=scenarios)
+                          scenarios=scenarios, scripted=scripted)
     except CompareError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2

@@ -63,7 +63,7 @@ def _say(stream: TextIO | None, text: str, end: str = "\n") -> None:
 
 def compare(runs: list, out, split: str = "test", episodes: int | None = None, evaluate: bool = False,
             command: str | None = None, progress: TextIO | bool | None = True, streams: int = 5,
-            generator=None, scenarios: str | None = None) -> dict:
+            generator=None, scenarios: str | None = None, scripted: list[str] | None = None) -> dict:
     """Compare run folders and the scripted baselines on ``split``; writes the report and figures into ``out``.
 
     Missing (or differently sized) evaluations are computed with ``evaluate=True`` and saved as
@@ -73,7 +73,8 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     (default: reconstructed). Returns the summary written to ``out/summary.json`` plus the paths of the files.
     SarSearch-v1 runs also get the rows of ``policies.reports.groups`` (scripted searchers over ``streams``
     detection streams, constant goals, IQM, P(found by t)); ``generator`` (a GeneratorConfig) with ``scenarios``
-    (the name ``hrlsac evaluate --generator`` gave the eval files) compares on that distribution instead.
+    (the name ``hrlsac evaluate --generator`` gave the eval files) compares on that distribution instead;
+    ``scripted`` names the scripted searchers to fly (default: all of ``policies.env.baselines.BASELINES``).
     """
     from policies.env.baselines_v0 import BASELINES_V0
     from policies.reports import groups as compare_groups
@@ -106,7 +107,7 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     environment = {"generator": generator} if generator is not None else {}
     if task == "SarSearch-v1":
         scripted_rows, baselines = compare_groups.scripted_rows(task, split, episodes, flight, streams, environment,
-                                                                progress)
+                                                                progress, scripted)
     for i, name in enumerate(BASELINES_V0 if task == "SarSearch-v0" else (), 1):
         _say(progress, f"[baseline {i}/{len(BASELINES_V0)}] {name} on {split} ({episodes} episodes) ... ", end="")
         started = time.perf_counter()

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TextIO
+from typing import Sequence, TextIO
 
 import numpy as np
 
@@ -31,13 +31,14 @@ SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bo
 
 
 def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, environment: dict,
-                  progress: TextIO | None) -> tuple[list[dict], dict[str, dict]]:
-    """Each scripted searcher's row over ``streams`` detection streams, and its first stream's metrics (figures)."""
+                  progress: TextIO | None, names: Sequence[str] | None = None) -> tuple[list[dict], dict[str, dict]]:
+    """Each scripted searcher's row (``names``, default all) over ``streams`` detection streams, and its first
+    stream's metrics (figures)."""
     from policies.env.baselines import BASELINES
     from policies.evaluation.baselines import run_baseline
 
     rows, first = [], {}
-    for name in BASELINES:
+    for name in names or BASELINES:
         runs = []
         for stream in range(streams):
             if progress is not None:
