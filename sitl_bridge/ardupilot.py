@@ -32,7 +32,8 @@ from sitl_bridge.ardupilot_guidance import CopterGuidance
 from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
 from sitl_bridge.ardupilot_targets import GuidedTargets
 from sitl_bridge.autopilot_base import (
-    ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int, battery_voltage_v)
+    ABOVE_HOME_FRAMES, ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int,
+    battery_voltage_v)
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.fences import CopterFence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
@@ -258,7 +259,8 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
     def _reposition(self, p: tuple[float, ...], frame: int, now: float, state: VehicleState) -> int:
         """GCS_MAVLINK_Copter::handle_command_int_do_reposition (a COMMAND_INT; x/y degrees * 1e7, z metres in the
         command's frame): outside GUIDED it needs param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (else DENIED); a
-        latitude/longitude out of range or both zero (Location::sanitize), or a frame other than global (AMSL)
+        latitude/longitude out of range or both zero, or 0 m above home (Location::sanitize reads those as "here"
+        and "this altitude", and a location it had to change is refused), or a frame other than global (AMSL)
         or relative to home (ArduPilot also takes terrain frames; no terrain is simulated), DENIED; then GUIDED
         flies to the point at WPNAV_SPEED and holds (no yaw change); FAILED if GUIDED cannot be entered. Armed on
         the ground the point is not taken (not checked against ArduPilot: a GUIDED takeoff replaces it there
@@ -267,8 +269,10 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
         if self.mode is not CopterMode.GUIDED and not change_mode:
             return DENIED
         x, y, z = p[4], p[5], p[6]
+        # location_from_command_t stores the altitude in whole centimetres (truncated): below 1 cm it is 0
+        zero_above_home = frame in ABOVE_HOME_FRAMES and math.isfinite(z) and int(z * 100.0) == 0
         target = self.global_target(frame, x, y, z) if abs(x) <= 90e7 and abs(y) <= 180e7 and (x, y) != (0, 0) \
-            else "no place"
+            and not zero_above_home else "no place"
         if isinstance(target, str):
             return DENIED
         if not self.set_mode(CopterMode.GUIDED, now, state, "DO_REPOSITION"):

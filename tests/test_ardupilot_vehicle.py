@@ -237,6 +237,8 @@ def test_do_reposition_is_a_guided_position_target_as_arducopter_makes_it():
     assert reposition(pilot, 0, x, y, 15.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == DENIED  # no flag
     assert vehicle.autopilot.mode is CopterMode.LOITER
     assert reposition(pilot, 1, 0, 0, 15.0) == DENIED  # Location::sanitize: no position
+    for zero in (0.0, 0.009, -0.009):  # Location::sanitize: 0 cm above home means "this altitude": refused
+        assert reposition(pilot, 1, x, y, zero, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == DENIED
     assert reposition(pilot, 1, x, y, 15.0, mavlink.MAV_FRAME_LOCAL_NED) == DENIED  # not a global frame
     assert reposition(pilot, 1, x, y, 15.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == ACCEPTED
     assert vehicle.autopilot.mode is CopterMode.GUIDED
