@@ -98,8 +98,7 @@ class NeighbourhoodGreedy(GreedyBayes):
 
     def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
         belief, k = self.core.belief[rows], self.cells
-        score = np.log(np.maximum(box_sum(belief, k), 1e-300)) - np.log(self.travel_s(rows, north, east)
-                                                                         + self.settings.travel_time_s)
+        score = self.greedy_score(box_sum(belief, k), self.travel_s(rows, north, east))
         centre_i, centre_j = np.divmod(score.reshape(len(rows), -1).argmax(axis=1), GRID_SIZE)
         cells = np.arange(GRID_SIZE)
         inside = ((np.abs(cells[None, :, None] - centre_i[:, None, None]) <= k)

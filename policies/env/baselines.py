@@ -251,11 +251,13 @@ class GreedyBayes(ScriptedSearch):
         return np.hypot(north[rows, :, None] - core.position[rows, 0, None, None],
                         east[rows, None, :] - core.position[rows, 1, None, None]) / core.flight.max_speed_mps
 
+    def greedy_score(self, belief: np.ndarray, travel_s: np.ndarray) -> np.ndarray:
+        """log(belief / (travel time + tau)) of every cell (belief and travel_s (R, G, G)): greedy Bayes' choice."""
+        return np.log(np.maximum(belief, 1e-300)) - np.log(travel_s + self.settings.travel_time_s)
+
     def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
         """The flat index of the cell each of these slots flies to next: the most belief per travel time."""
-        belief = self.core.belief[rows]
-        score = np.log(np.maximum(belief, 1e-300)) - np.log(self.travel_s(rows, north, east)
-                                                            + self.settings.travel_time_s)
+        score = self.greedy_score(self.core.belief[rows], self.travel_s(rows, north, east))
         return score.reshape(len(rows), -1).argmax(axis=1)
 
 
@@ -302,9 +304,6 @@ class LookaheadBayes(GreedyBayes):
     def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
         super().__init__(core, settings)
         self.horizon_steps = max(1, int(round(settings.lookahead_s / core.flight.step_period_s)))
-
-    def greedy_score(self, belief: np.ndarray, travel_s: np.ndarray) -> np.ndarray:
-        return np.log(np.maximum(belief, 1e-300)) - np.log(travel_s + self.settings.travel_time_s)
 
     def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
         belief, travel = self.core.belief[rows], self.travel_s(rows, north, east)
