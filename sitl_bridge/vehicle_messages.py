@@ -203,6 +203,8 @@ class MessageHandlers:
     # ------------------------------------------------------------------ small protocol services
     def _on_timesync(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if msg.tc1 == 0:  # a request: answer with our time since boot in ns
+            # The target fields stay 0, as both autopilots leave them (PX4 mavlink_timesync.cpp and ArduPilot
+            # GCS_Common.cpp handle_timesync fill tc1 and ts1 only); checked 2026-12-07.
             endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_since_boot_s * 1e9), msg.ts1))
 
     def _on_mission_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
