@@ -4,9 +4,10 @@
 Prints, per baseline, success rate (Wilson 95 % interval), collision / out-of-bounds / ran-dry / returned rates,
 coverage and the time-to-find distribution (steps to first detection of the victim and to success), and writes
 them to benchmarks/results/baselines.json. Targets: random <= 10 % success, the best scripted searcher >= 60 %.
-``--only NAME[,NAME]`` flies only those searchers, ``--streams N`` each over N detection streams (the same scenarios, other draws;
-``hrlsac compare``'s scripted rows use 5) with the streams' mean and t 95 % interval, and ``--generator FILE`` draws
-the scenarios from a generator config file (e.g. docs/results/large-area.yaml, the 2 km square). With several
+``--only NAME[,NAME]`` flies only those searchers, ``--streams N`` each over N detection streams (the same
+scenarios, other draws; ``hrlsac compare``'s scripted rows use 5) with the streams' mean and t 95 % interval, and
+``--generator FILE`` draws the scenarios from a generator config file (e.g. docs/results/large-area.yaml, the 2 km
+square). With several
 searchers each is also compared with the first, paired on the same scenarios and streams, with a 95 % interval from
 a bootstrap over the scenarios (``policies.evaluation.aggregate.paired_scenario_bootstrap``).
 
@@ -60,8 +61,11 @@ def main() -> int:
             streams.setdefault(name, []).append(result["success_rate"])
             successes.setdefault(name, []).append(result["per_episode"]["success"])
             print_result(name if args.streams == 1 else f"{name}, stream {stream}", result)
-    summary = {name: {"per_stream": rates, "mean": t_interval(rates)[0], "t95": t_interval(rates)[2]}
-               for name, rates in streams.items() if len(rates) > 1}
+    summary = {}
+    for name, rates in streams.items():
+        if len(rates) > 1:
+            mean, _, t95 = t_interval(rates)
+            summary[name] = {"per_stream": rates, "mean": mean, "t95": t95}
     first = chosen[0]
     for name in chosen[1:]:  # each against the first, paired on the same scenarios and streams
         mean, low, high = paired_scenario_bootstrap(successes[name], successes[first])

@@ -203,6 +203,12 @@ def home_position(v: TelemetrySource) -> mavlink.MAVLink_message:
                                                  int(v.time_since_boot_s * 1e6))
 
 
+def known_home_position(v: TelemetrySource) -> mavlink.MAVLink_message | None:
+    """HOME_POSITION once home is known (a position fix), else nothing: PX4's HOME_POSITION stream sends only a valid
+    home (HOME_POSITION.hpp), ArduPilot's send_home_position returns before home is set (GCS_Common.cpp)."""
+    return home_position(v) if v.autopilot.gps_ok else None
+
+
 def autopilot_version(v: TelemetrySource) -> mavlink.MAVLink_message:
     ap = v.autopilot
     return mavlink.MAVLink_autopilot_version_message(
@@ -219,7 +225,7 @@ BUILDERS: dict[int, Callable[[TelemetrySource], mavlink.MAVLink_message | None]]
     mavlink.MAVLINK_MSG_ID_ATTITUDE: attitude,
     mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
     mavlink.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: known_home_position,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
 }

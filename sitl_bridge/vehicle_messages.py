@@ -96,8 +96,6 @@ class MessageHandlers:
                       else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             builder = telemetry.BUILDERS.get(msg_id)
             follow_up = builder(self) if builder else None
-            if msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION and not self.autopilot.gps_ok:
-                follow_up = None  # no home yet: neither autopilot sends one (send_home_position, HOME_POSITION stream)
             if self.is_ardupilot:
                 # GCS_Common.cpp handle_command_request_message: FAILED for an id with no ap_message, else
                 # ACCEPTED and send_message(), which sends nothing when there is nothing to report (no battery
@@ -108,7 +106,7 @@ class MessageHandlers:
                 result = ACCEPTED if follow_up is not None else DENIED
         elif command == mavlink.MAV_CMD_GET_HOME_POSITION and self.is_ardupilot:
             # GCS_MAVLINK::handle_command_get_home_position: FAILED until home is set, else the message
-            follow_up = telemetry.home_position(self) if self.autopilot.gps_ok else None
+            follow_up = telemetry.known_home_position(self)
             result = ACCEPTED if follow_up is not None else FAILED
         else:
             result = self.autopilot.handle_command(command, p, now, self.state, msg.get_srcComponent(), frame)
