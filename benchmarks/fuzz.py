@@ -59,13 +59,15 @@ HOSTILE_TYPES = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "SET_POSITION_TARGE
                  "PARAM_REQUEST_READ", "PARAM_REQUEST_LIST", "TIMESYNC", "SET_MODE", "MISSION_REQUEST_LIST",
                  "SETUP_SIGNING", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "HOME_POSITION", "SYS_STATUS",
                  "COMMAND_ACK", "STATUSTEXT", "EXTENDED_SYS_STATE", "ATTITUDE", "GPS_RAW_INT", "RADIO_STATUS",
-                 "ADSB_VEHICLE", "COLLISION", "AUTOPILOT_VERSION", "PARAM_VALUE", "BATTERY_STATUS")
+                 "ADSB_VEHICLE", "COLLISION", "AUTOPILOT_VERSION", "PARAM_VALUE", "BATTERY_STATUS",
+                 "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST",
+                 "MISSION_ACK", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT")
 _CLASSES = {cls.msgname: cls for cls in mavlink.mavlink_map.values()}
 # Commands the vehicle acts on (random command numbers would almost never reach its logic), and its mode numbers.
 KNOWN_COMMANDS = (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_TAKEOFF,
                   mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_SET_CAMERA_ZOOM,
                   mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE,
-                  mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
+                  mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_MISSION_START)
 PLAUSIBLE_PARAMS = (1.0, 0.0, 1.0, 4.0, 6.0, 3.0, 2.0, 33.0, 24.0, 500.0)  # arm, custom-mode numbers, msg ids
 
 

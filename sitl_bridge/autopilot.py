@@ -21,6 +21,7 @@ from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, Veloci
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.px4_failsafes import (
     BATTERY_TEXTS, CRITICAL, EMERGENCY, NONE, Px4Failsafes, battery_warning_level)
+from sitl_bridge.px4_mission import Px4MissionMode
 from sitl_bridge.px4_modes import FlightMode, base_mode
 from sitl_bridge.px4_offboard import OffboardSetpoints
 from sitl_bridge.px4_orbit import Orbit
@@ -32,8 +33,10 @@ FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: arm/disarm without c
 MISSION_PLANNER_COMPONENT = 190  # PX4 prints "Switching to ... not available" only for DO_SET_MODE from this one
 REJECT_PRINT_INTERVAL_S = 1.0  # ... and at most once a second (Commander::printRejectMode)
 FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0, official release
-# The capabilities we really have (PX4 claims more: missions, FTP, ...; we do not implement those).
+# The capabilities we really have (PX4 claims more: FTP, ...; we do not implement those). MAVSDK refuses every
+# mission transfer with a vehicle whose AUTOPILOT_VERSION lacks MISSION_INT (system_impl.cpp).
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
@@ -47,10 +50,10 @@ BATTERY_FAILURES = {CRITICAL: "battery below BAT_CRIT_THR", EMERGENCY: "battery 
 FAILSAFE_MODES = {0: FlightMode.POSCTL, 3: FlightMode.RTL, 4: FlightMode.LAND, 5: FlightMode.HOLD}
 PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", FlightMode.POSCTL: "holding",
                  FlightMode.ORBIT: "holding", FlightMode.TAKEOFF: "taking_off", FlightMode.RTL: "returning",
-                 FlightMode.LAND: "landing"}
+                 FlightMode.LAND: "landing", FlightMode.MISSION: "mission"}
 
 
-class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
+class Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
@@ -78,6 +81,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         # In the offboard-loss fallback: the user's intended mode is still OFFBOARD (Failsafe::checkModeFallback
         # leaves it), so once setpoints flow again the fallback clears and the vehicle is back in OFFBOARD.
         self.offboard_fallback = False
+        self.mission_reached_news = []
 
     # ----------------------------------------------------------------- what the vehicle reports
     def offboard_signal_lost(self, now: float) -> bool:
@@ -107,7 +111,10 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             return mavlink.MAV_LANDED_STATE_ON_GROUND
         if self.mode is FlightMode.TAKEOFF:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
-        if self.mode is FlightMode.LAND or (self.mode is FlightMode.RTL and self.rtl_landing):
+        if self.mode is FlightMode.MISSION and self.mission_setpoint == "takeoff":
+            return mavlink.MAV_LANDED_STATE_TAKEOFF
+        if (self.mode is FlightMode.LAND or (self.mode is FlightMode.RTL and self.rtl_landing)
+                or (self.mode is FlightMode.MISSION and self.mission_setpoint == "land")):
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
 
@@ -118,6 +125,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         level = battery_warning_level(self.battery_fraction(state), self.params)
         if level in BATTERY_FAILURES:  # batteryCheck.cpp: critical or worse affects every mode
             return BATTERY_FAILURES[level]
+        if self.mode is FlightMode.MISSION and not self.check_mission(0.0, state, announce=False):
+            return "No valid mission available"  # modeCheck.cpp: an event only, as "No valid global position"
         return next(iter(self.geofence_violations(state)), None)
 
     # ----------------------------------------------------------------- modes and arming
@@ -125,18 +134,25 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
                  source_component: int | None = None) -> int:
         """Switch mode as PX4's commander would; returns a MAV_RESULT. ``source_component``: the requester's
         MAVLink component for external requests (None: the autopilot's own switch, e.g. a failsafe)."""
-        if mode is FlightMode.OFFBOARD and self.mode is not FlightMode.OFFBOARD and self.offboard_signal_lost(now):
-            # Commander: the mode cannot run (offboard_control_signal_lost), DO_SET_MODE gets TEMPORARILY_REJECTED
-            # and printRejectMode() tells a ground station (component 190) once a second.
+        # Commander: a mode that cannot run (offboard_control_signal_lost; armed, auto_mission_missing) gets
+        # TEMPORARILY_REJECTED, and printRejectMode() tells a ground station (component 190) once a second.
+        cannot_run = {FlightMode.OFFBOARD: lambda: self.offboard_signal_lost(now),
+                      FlightMode.MISSION: lambda: self.armed and not self.check_mission(now, state, announce=False)}
+        if mode in cannot_run and self.mode is not mode and cannot_run[mode]():
             if (source_component == MISSION_PLANNER_COMPONENT
                     and now - self._last_reject_print_s > REJECT_PRINT_INTERVAL_S):
                 self._last_reject_print_s = now
-                self._event(now, "Switching to Offboard is currently not available", mavlink.MAV_SEVERITY_CRITICAL)
+                self._event(now, f"Switching to {mode.name.capitalize()} is currently not available",
+                            mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         self.offboard_fallback = False  # any switch but the fallback's own ends it (the caller sets it after)
         self._forget_failsafe_actions()  # ... and is a user takeover of a failsafe's action (the same rule)
         if mode is self.mode:
             return ACCEPTED
+        if self.mode is FlightMode.MISSION:
+            # MissionBase::on_inactivation; it also sets seq_reached to -1 but does not publish it, so MISSION_CURRENT
+            # goes on seeing the last item reached (PAUSED) until the mission starts again
+            self._climb = None
         self.mode = mode
         self.state_changed = True
         self.cruise_speed_mps = self.hold_yaw_rad = None  # Navigator resets the cruising speed on a mode change
@@ -152,6 +168,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         elif mode is FlightMode.RTL:
             self.rtl_landing = False
         self._event(now, f"mode {mode.name} ({reason})", broadcast=False)  # PX4 announces no mode change in text
+        if mode is FlightMode.MISSION and self.armed:
+            self._start_mission(now, state)
         return ACCEPTED
 
     def arm(self, now: float, state: VehicleState, force: bool) -> int:
@@ -168,6 +186,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
         if self.mode in (FlightMode.HOLD, FlightMode.POSCTL):
             self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
         self._event(now, "Armed by external command\t")  # Commander::arm; forced or not, the same text
+        if self.mode is FlightMode.MISSION:  # Navigator runs a mode only while armed: the mission starts now
+            self._start_mission(now, state)
         if force:
             self._event(now, "forced: pre-arm checks skipped", broadcast=False)
         return ACCEPTED
@@ -190,6 +210,7 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             self._event(now, "Disarming denied: not landed", mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         self.armed, self.state_changed, self.offboard_fallback = False, True, False
+        self._disarmed_since_start = True
         self._forget_failsafe_actions()
         self._event(now, f"Disarmed by {reason}\t")  # Commander::disarm, arm_disarm_reason_str
         if self.mode is not FlightMode.HOLD and state.on_ground:
@@ -213,6 +234,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             return DENIED
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             return self._takeoff(p[6], now, state)
+        if command == mavlink.MAV_CMD_MISSION_START:
+            return self._mission_start(p[0], now, state, source_component)
         if command == mavlink.MAV_CMD_NAV_LAND:
             return self.set_mode(FlightMode.LAND, now, state, "NAV_LAND")
         if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -337,6 +360,8 @@ class Autopilot(OffboardSetpoints, Px4Geofence, Px4Failsafes, AutopilotBase):
             return self._landing_command(state, self.hold_target[0], self.hold_target[1])
         if mode is FlightMode.RTL:
             return self._rtl_command(state)
+        if mode is FlightMode.MISSION:
+            return self._mission_command(now, state)
         if mode is FlightMode.ORBIT and self.orbit is not None and not state.on_ground:
             return self.orbit.command(state, self.airframe, self.params["MPC_XY_CRUISE"])
         # HOLD, POSCTL (sticks centred) and an orbit whose radius was refused: keep the captured position (or fly

@@ -2,7 +2,8 @@
 
 The runner's guard (``autonomy/geofence.py``) lives in the companion computer's software; the autopilot's fence is
 the layer beneath it, and what stops the drone when that software misbehaves. Both are parameter-only fences around
-home (no fence upload: the mission protocol is not emulated). Mixins of the two personalities, read in:
+home (no fence upload: the mission protocol's fence type is refused, sitl_bridge.mission_protocol). Mixins of the
+two personalities, read in:
 
 * PX4-Autopilot: ``src/modules/navigator/geofence_params.yaml`` (GF_ACTION 2 = Hold, GF_MAX_HOR_DIST and
   GF_MAX_VER_DIST 0 = off), ``Navigator::geofence_breach_check`` (every 200 ms while GF_ACTION is not None; with

@@ -39,6 +39,14 @@ class ParamSpec:
 PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MIS_TAKEOFF_ALT", REAL32, 2.5, 0.0, 500.0,
               "takeoff altitude above home when NAV_TAKEOFF param7 is NaN (m)"),
+    # Mission mode (navigator_params.c, mission_params.c; sitl_bridge.px4_mission)
+    ParamSpec("NAV_ACC_RAD", REAL32, 10.0, 0.05, 200.0,
+              "mission: horizontal acceptance radius of a waypoint whose param2 does not set one (m)"),
+    ParamSpec("NAV_MC_ALT_RAD", REAL32, 0.8, 0.05, 200.0, "mission: vertical acceptance radius of a waypoint (m)"),
+    ParamSpec("MIS_DIST_1WP", REAL32, 10000.0, -1.0, 10000.0,
+              "mission: warn when the first waypoint is further than this from home (m); <= 0 off"),
+    ParamSpec("MIS_YAW_ERR", REAL32, 12.0, 0.0, 90.0,
+              "mission: heading error within which a waypoint with a heading (param4) is reached (deg)"),
     ParamSpec("COM_OF_LOSS_T", REAL32, 1.0, 0.0, 60.0, "time without offboard setpoints before the failsafe (s)"),
     ParamSpec("COM_OBL_RC_ACT", INT32, 0, 0, 7,
               "offboard-loss failsafe: 0 position hold (POSCTL), 3 return (RTL), 4 land, 5 hold (AUTO.LOITER)",

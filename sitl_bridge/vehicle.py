@@ -27,6 +27,7 @@ from sitl_bridge.autopilot import Autopilot
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
 from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.link import Link
+from sitl_bridge.mission_protocol import MissionReports, MissionTransfer
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.sensors import SensorSuite
 from sitl_bridge.signing import vehicle_signing
@@ -87,6 +88,14 @@ class SimulatedVehicle(MessageHandlers):
         self.setup_signing_refused = 0
         if config.signing_key is not None:
             self._enable_signing(config.signing_key)
+        # PX4's mission protocol (the ArduPilot personality answers guided-mode items only): the stored mission
+        # outlives a reboot, as PX4's dataman does
+        self.missions: MissionTransfer | None = None if self.is_ardupilot else MissionTransfer(
+            on_mission=lambda items, current: self.autopilot.load_mission(items, current, self.time_s, self.state),
+            current_seq=lambda: self.autopilot.mission_current,
+            set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
+            text=lambda text, severity: self.autopilot._event(self.time_s, text, severity))
+        self.mission_reports = MissionReports()
         self._handlers = self.handlers()
         self._boot_tick = -int(round(config.boot_time_s * config.physics_rate_hz))  # the tick the autopilot booted
         self._reboot_tick = None if config.reboot_at_s is None else int(round(config.reboot_at_s / self.dt_s))
@@ -160,6 +169,7 @@ class SimulatedVehicle(MessageHandlers):
         if self.powered:
             self._flush_events()
             self._send_telemetry()
+            self._send_mission_status()
 
     def _send_statustext(self, severity: int, text: str) -> None:
         """STATUSTEXT carries 50 bytes: a longer text goes in chunks that share an id, numbered by chunk_seq (MAVLink
@@ -203,6 +213,18 @@ class SimulatedVehicle(MessageHandlers):
                 if built[msg_id] is not None:
                     endpoint.send(built[msg_id])
 
+    def _send_mission_status(self) -> None:
+        """The mission protocol's retries, and MISSION_CURRENT / MISSION_ITEM_REACHED (PX4 personality)."""
+        if self.missions is None:
+            return
+        now, ap = self.time_s, self.autopilot
+        self.missions.tick(now)
+        for msg in self.mission_reports.due(now, ap.mission_current, len(ap.mission_items), ap.mission_reached_news,
+                                            ap.mission_state):
+            self.broadcast(msg)
+        if ap.events:  # the transfer's texts ("Operation timeout")
+            self._flush_events()
+
     def broadcast(self, msg: mavlink.MAVLink_message) -> None:
         """Send one message on every link."""
         for endpoint in self.endpoints:
@@ -241,8 +263,10 @@ class SimulatedVehicle(MessageHandlers):
         self._down_until_tick = None
         state = self.state
         here = (state.north_m, state.east_m, state.down_m)
+        current = getattr(self.autopilot, "mission_current", 0)
         self.autopilot = make_autopilot(self.config, self.params, self.frame)
         self.autopilot.gps_ok = self.sensors.gps is not None
+        self.mission_reports = MissionReports()
         self.endpoints = self._make_endpoints()
         if self.signing is not None:
             for link_id, endpoint in enumerate(self.endpoints):
@@ -250,6 +274,9 @@ class SimulatedVehicle(MessageHandlers):
         self.origin_ned = here
         self._set_home(here)
         self.autopilot.home_changed = False  # just announced
+        if self.missions is not None and self.missions.items:
+            self.missions.transfer = None  # a transfer does not survive the reboot; the stored mission does
+            self.autopilot.load_mission(self.missions.items, current, self.time_s, state)
         self.log(f"autopilot booted at {self.time_s:.2f} s; home and origin re-set at "
                  f"{here[0]:.1f} m N, {here[1]:.1f} m E, {-here[2]:.1f} m up")
 

@@ -14,6 +14,7 @@ from sitl_bridge import telemetry
 from missions.signing import LinkSigning
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
+from sitl_bridge.mission_protocol import MissionTransfer
 from sitl_bridge.multirotor import VehicleState
 from sitl_bridge.params import ParameterStore, decode_bytewise, decode_float, encode_bytewise
 from sitl_bridge.signing import requested_key
@@ -21,6 +22,8 @@ from sitl_bridge.telemetry_profiles import ARDUPILOT_STREAM_MESSAGES, DATA_STREA
 from sitl_bridge.vehicle_config import VehicleConfig
 
 CAMERA_COMPONENT = mavlink.MAV_COMP_ID_CAMERA  # zoom commands may be addressed to the camera
+# PX4's mission manager also takes messages addressed to the mission planner's component (CHECK_SYSID_COMPID_MISSION)
+MISSION_COMPONENTS = (AUTOPILOT_COMPONENT, mavlink.MAV_COMP_ID_MISSIONPLANNER)
 REQUESTABLE = (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
 
 
@@ -37,6 +40,7 @@ class MessageHandlers:
     state: VehicleState
     endpoints: list[Endpoint]
     signing: LinkSigning | None
+    missions: MissionTransfer | None
     setup_signing_refused: int
     is_ardupilot: bool
     dt_s: float
@@ -64,7 +68,21 @@ class MessageHandlers:
         if self.is_ardupilot:  # PX4 implements neither REQUEST_DATA_STREAM nor guided-mode mission items
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
             table["MISSION_ITEM_INT"] = table["MISSION_ITEM"] = self._on_mission_item
+        elif self.missions is not None:  # PX4: the mission protocol (sitl_bridge.mission_protocol)
+            m = self.missions
+            for name, method in (("MISSION_COUNT", m.on_count), ("MISSION_ITEM_INT", m.on_item),
+                                 ("MISSION_ITEM", m.on_item), ("MISSION_REQUEST_INT", m.on_request),
+                                 ("MISSION_REQUEST", m.on_request), ("MISSION_ACK", m.on_ack),
+                                 ("MISSION_REQUEST_LIST", m.on_request_list), ("MISSION_CLEAR_ALL", m.on_clear_all),
+                                 ("MISSION_SET_CURRENT", m.on_set_current)):
+                table[name] = self._mission_handler(method)
         return table
+
+    def _mission_handler(self, method: Callable) -> Callable:
+        def handle(endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
+            if self._for_us(msg, MISSION_COMPONENTS):
+                method(endpoint, msg, self.time_s)
+        return handle
 
     def _for_us(self, msg: mavlink.MAVLink_message,
                 components: tuple[int, ...] = (AUTOPILOT_COMPONENT,)) -> bool:

@@ -66,7 +66,7 @@ def _fly(client: UdpClient, config: VehicleConfig) -> None:
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-    assert not version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT  # we do not claim missions
+    assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT  # missions (MAVSDK needs the bit)
 
     # GPS, then arm and take off to 10 m (param7 is AMSL, as in PX4).
     client.wait(lambda: "GLOBAL_POSITION_INT" in client.latest, 5.0, "a global position")

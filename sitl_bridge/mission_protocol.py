@@ -1,0 +1,337 @@
+"""The vehicle's side of the MAVLink mission protocol, as PX4's MavlinkMissionManager runs it.
+
+Read in PX4-Autopilot ``src/modules/mavlink/mavlink_mission.cpp`` (main at 02e73e3, 2026-03; docs/sitl.md, "PX4
+missions", has the line references and what differs from v1.14):
+
+* **upload**: MISSION_COUNT, then MISSION_REQUEST_INT for seq 0, 1, ... (re-sent after 0.25 s without the item),
+  MISSION_ITEM_INT for each, and MISSION_ACK ACCEPTED once the last one is in; only then does the mission replace
+  the stored one. A count of 0 clears the mission. An item with the wrong seq is ignored (the retry asks again);
+  an item whose frame or command is not supported aborts the transfer with that MAV_MISSION_RESULT; 5 s without
+  a message ends it with "Operation timeout" and no ACK. The upload is accepted whatever the mission asks (a
+  mission the navigator then finds infeasible is stored but invalid: ``sitl_bridge.px4_mission``), also in flight.
+* **download**: MISSION_REQUEST_LIST gives MISSION_COUNT, each MISSION_REQUEST_INT (MISSION_REQUEST) the item as
+  MISSION_ITEM_INT (MISSION_ITEM); the client's MISSION_ACK ends it. Positional items come back in a GLOBAL frame
+  (relative altitude or not, as uploaded), the others in MAV_FRAME_MISSION.
+* **MISSION_CLEAR_ALL** (ACK ACCEPTED) and **MISSION_SET_CURRENT** (no ACK: the next MISSION_CURRENT says it).
+* PX4 answers in the ``_INT`` form until a client uses the float messages (a sticky "int mode"), and switches form
+  when a client answers a request with MISSION_ACK UNSUPPORTED.
+
+Only the MISSION type is stored: a fence or rally upload gets MAV_MISSION_UNSUPPORTED (PX4 stores them; this
+simulator's fences are PX4's parameter fences, ``sitl_bridge.fences``), and their download lists nothing.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_bridge.endpoint import Endpoint
+
+RETRY_S = 0.25  # MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: re-request an item after this long without it
+TIMEOUT_S = 5.0  # MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a transfer silent this long is abandoned
+MAX_ITEMS = 500  # CONFIG_NUM_MISSION_ITMES_SUPPORTED's default (PX4 SITL builds allow 10,000)
+
+MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
+
+ABSOLUTE_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
+RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+INT_ONLY_FRAMES = (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+
+# Commands flown by sitl_bridge.px4_mission. PX4 accepts more (LOITER_TO_ALT, ROI, VTOL, gates, DO_JUMP, ...);
+# those are refused here with MAV_MISSION_UNSUPPORTED rather than stored and skipped.
+POSITION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
+                     mavlink.MAV_CMD_NAV_LOITER_TIME, mavlink.MAV_CMD_NAV_LOITER_UNLIM)
+NAVIGATION_COMMANDS = (mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                       mavlink.MAV_CMD_NAV_DELAY)
+# Camera and gimbal items (what MAVSDK's MissionItem adds for its camera and gimbal fields): stored, and passed over
+# in flight with a log line, since the simulator has no camera triggering or gimbal.
+PAYLOAD_COMMANDS = (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_IMAGE_STOP_CAPTURE,
+                    mavlink.MAV_CMD_VIDEO_START_CAPTURE, mavlink.MAV_CMD_VIDEO_STOP_CAPTURE,
+                    mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST, mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+                    mavlink.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE, mavlink.MAV_CMD_DO_MOUNT_CONTROL,
+                    mavlink.MAV_CMD_DO_MOUNT_CONFIGURE)
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One stored mission item: its command, param1-4, and a position (degrees, metres) or param5-7."""
+
+    command: int
+    params: tuple[float, float, float, float]
+    x: float
+    """Latitude (degrees) for a positional item, else param5."""
+    y: float
+    """Longitude (degrees) for a positional item, else param6."""
+    z: float
+    """Altitude (m: above home when ``relative``, else above mean sea level) or param7."""
+    positional: bool
+    relative: bool = False
+    autocontinue: bool = True
+
+
+def parse_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
+    """A MISSION_ITEM(_INT) as PX4's parse_mavlink_mission_item reads it, or the MAV_MISSION_RESULT refusing it."""
+    is_int = msg.get_type() == "MISSION_ITEM_INT"
+    params = (msg.param1, msg.param2, msg.param3, msg.param4)
+    if msg.frame in ABSOLUTE_FRAMES + RELATIVE_FRAMES and (is_int or msg.frame not in INT_ONLY_FRAMES):
+        if msg.command not in POSITION_COMMANDS:
+            return mavlink.MAV_MISSION_UNSUPPORTED
+        scale = 1e-7 if is_int else 1.0
+        # Not in PX4, which stores what it gets: a position that is not one would fly the simulator into NaNs
+        if not (math.isfinite(msg.x) and abs(msg.x * scale) <= 90.0):
+            return mavlink.MAV_MISSION_INVALID_PARAM5_X
+        if not (math.isfinite(msg.y) and abs(msg.y * scale) <= 180.0):
+            return mavlink.MAV_MISSION_INVALID_PARAM6_Y
+        if not math.isfinite(msg.z):
+            return mavlink.MAV_MISSION_INVALID_PARAM7
+        return MissionItem(msg.command, params, msg.x * scale, msg.y * scale, msg.z, positional=True,
+                           relative=msg.frame in RELATIVE_FRAMES, autocontinue=bool(msg.autocontinue))
+    if msg.frame == mavlink.MAV_FRAME_MISSION:
+        if msg.command not in NAVIGATION_COMMANDS + PAYLOAD_COMMANDS:
+            return mavlink.MAV_MISSION_UNSUPPORTED
+        return MissionItem(msg.command, params, float(msg.x), float(msg.y), msg.z, positional=False,
+                           autocontinue=bool(msg.autocontinue))
+    return mavlink.MAV_MISSION_UNSUPPORTED_FRAME
+
+
+def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, int],
+                 as_int: bool) -> mavlink.MAVLink_message:
+    """The item as PX4's format_mavlink_mission_item sends it in a download."""
+    if item.positional:
+        frame = RELATIVE_FRAMES[as_int] if item.relative else ABSOLUTE_FRAMES[as_int]
+    else:
+        frame = mavlink.MAV_FRAME_MISSION
+    x, y = item.x, item.y
+    if as_int:
+        x, y = (_int32(x * 1e7), _int32(y * 1e7)) if item.positional else (_int32(x), _int32(y))
+        return mavlink.MAVLink_mission_item_int_message(*target, seq, frame, item.command, int(current),
+                                                        int(item.autocontinue), *item.params, x, y, item.z, MISSION)
+    return mavlink.MAVLink_mission_item_message(*target, seq, frame, item.command, int(current),
+                                                int(item.autocontinue), *item.params, x, y, item.z, MISSION)
+
+
+def _int32(value: float) -> int:
+    """A float as MISSION_ITEM_INT's int32 x / y (a float item's NaN or huge param5/6 cannot go out as one)."""
+    return int(round(min(max(value, -2.0**31), 2.0**31 - 1))) if math.isfinite(value) else 0
+
+
+@dataclass
+class _Transfer:
+    """An upload being received ("receiving") or a download being sent ("sending")."""
+
+    direction: str
+    endpoint: Endpoint
+    partner: tuple[int, int]  # the client's system and component
+    count: int
+    next_seq: int = 0
+    items: list[MissionItem] | None = None
+    current_seq: int = -1  # the uploaded item marked current, if any
+    last_received_s: float = 0.0
+    last_request_s: float = -math.inf
+
+
+class MissionTransfer:
+    """The mission protocol of one vehicle: the stored mission and at most one transfer at a time.
+
+    ``on_mission(items, current_seq)`` hands a completed upload (or a clear: no items) to the navigator, with the
+    uploaded item marked current (-1: none); ``current_seq()`` reads the navigator's current item for a download;
+    ``set_current(seq)`` asks the navigator to jump; ``text(text, severity)`` sends PX4's STATUSTEXTs.
+    """
+
+    def __init__(self, on_mission: Callable[[list[MissionItem], int], None], current_seq: Callable[[], int],
+                 set_current: Callable[[int], None], text: Callable[[str, int], None]):
+        self.items: list[MissionItem] = []
+        self.int_mode = True  # PX4 main; v1.14 started in float mode (docs/sitl.md)
+        self.transfer: _Transfer | None = None
+        self._last_upload: tuple[tuple[int, int], int] | None = None  # (client, count) of the last upload's ACK
+        self._on_mission, self._current_seq, self._set_current, self._text = on_mission, current_seq, set_current, text
+
+    # ------------------------------------------------------------------ upload
+    def on_count(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        busy = self.transfer
+        if busy is not None:
+            if busy.direction == "receiving" and busy.partner == partner and busy.next_seq == 0:
+                self._request(busy, now)  # our first request was lost: ask again
+            else:
+                self._text("WPM: REJ. CMD: Busy\t" if busy.direction == "receiving" else "WPM: IGN MISSION_COUNT: Busy\t",
+                           mavlink.MAV_SEVERITY_CRITICAL)
+                self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, msg.mission_type)
+            return
+        if msg.mission_type != MISSION:
+            known = msg.mission_type in (mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY)
+            self._ack(endpoint, partner, mavlink.MAV_MISSION_UNSUPPORTED if known else mavlink.MAV_MISSION_INVALID,
+                      msg.mission_type)
+            return
+        if msg.count > MAX_ITEMS:
+            self._ack(endpoint, partner, mavlink.MAV_MISSION_NO_SPACE)
+            return
+        if msg.count == 0:  # an empty upload clears the mission
+            self._store([], -1)
+            self._ack(endpoint, partner, ACCEPTED)
+            return
+        self.transfer = _Transfer("receiving", endpoint, partner, msg.count, items=[], last_received_s=now)
+        self._request(self.transfer, now)
+
+    def on_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        self.int_mode = msg.get_type() == "MISSION_ITEM_INT"
+        t, partner = self.transfer, (msg.get_srcSystem(), msg.get_srcComponent())
+        if t is None and self._last_upload == (partner, msg.seq + 1):
+            self._ack(endpoint, partner, ACCEPTED)  # the last item again: the client lost our ACK
+            return
+        if t is None or t.direction != "receiving":
+            self._text("IGN MISSION_ITEM: No transfer\t", mavlink.MAV_SEVERITY_CRITICAL)
+            self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, msg.mission_type)
+            return
+        if msg.mission_type != MISSION:
+            self._abort(mavlink.MAV_MISSION_ERROR)
+            return
+        if msg.seq != t.next_seq:
+            return  # PX4 ignores it; the retry asks for the one it wants
+        t.last_received_s = now
+        item = parse_item(msg)
+        if isinstance(item, int):
+            self._text("IGN MISSION_ITEM: Invalid item\t", mavlink.MAV_SEVERITY_CRITICAL)
+            self._abort(item)
+            return
+        assert t.items is not None
+        t.items.append(item)
+        if msg.current == 1:
+            t.current_seq = msg.seq
+        t.next_seq += 1
+        if t.next_seq < t.count:
+            self._request(t, now)
+            return
+        self.transfer = None
+        self._store(t.items, t.current_seq)
+        self._last_upload = (t.partner, t.count)
+        self._ack(t.endpoint, t.partner, ACCEPTED)
+
+    def _request(self, t: _Transfer, now: float) -> None:
+        cls = mavlink.MAVLink_mission_request_int_message if self.int_mode else mavlink.MAVLink_mission_request_message
+        t.endpoint.send(cls(*t.partner, t.next_seq, MISSION))
+        t.last_request_s = now
+
+    def _store(self, items: list[MissionItem], current_seq: int) -> None:
+        self.items, self._last_upload = list(items), None
+        self._on_mission(self.items, current_seq)
+
+    def _abort(self, result: int) -> None:
+        t = self.transfer
+        assert t is not None
+        self.transfer = None
+        self._ack(t.endpoint, t.partner, result)
+
+    # ------------------------------------------------------------------ download
+    def on_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        t = self.transfer
+        if t is not None and not (t.direction == "sending" and t.partner == partner):
+            self._text("Mission download request ignored, already active\t", mavlink.MAV_SEVERITY_INFO)
+            return
+        count = len(self.items) if msg.mission_type == MISSION else 0
+        self.transfer = None
+        if count:
+            self.transfer = _Transfer("sending", endpoint, partner, count, last_received_s=now)
+        endpoint.send(mavlink.MAVLink_mission_count_message(*partner, count, msg.mission_type))
+
+    def on_request(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        self.int_mode = msg.get_type() == "MISSION_REQUEST_INT"
+        t = self.transfer
+        if t is None:
+            return  # PX4 ignores requests when idle
+        if t.direction == "receiving":
+            self._text("WPM: REJ. CMD: Busy\t", mavlink.MAV_SEVERITY_CRITICAL)
+            return
+        if msg.seq not in (t.next_seq, t.next_seq - 1) or msg.seq >= t.count:
+            self.transfer = None
+            self._text("WPM: REJ. CMD: Req. WP was unexpected\t", mavlink.MAV_SEVERITY_CRITICAL)
+            self._ack(endpoint, t.partner, mavlink.MAV_MISSION_ERROR)
+            return
+        t.last_received_s = now
+        t.next_seq = msg.seq + 1
+        current = msg.seq == self._current_seq()
+        endpoint.send(item_message(self.items[msg.seq], msg.seq, current, t.partner, self.int_mode))
+
+    def on_ack(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        t = self.transfer
+        if t is None:
+            return
+        if t.direction == "sending":
+            self.transfer = None  # the client's ACK (any type) ends a download
+        elif msg.type == mavlink.MAV_MISSION_UNSUPPORTED:  # the client wants the other form of request
+            self.int_mode = not self.int_mode
+            self._request(t, now)
+
+    # ------------------------------------------------------------------ clear, set current, time
+    def on_clear_all(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        if self.transfer is not None:
+            self._text("WPM: IGN CLEAR CMD: Busy\t", mavlink.MAV_SEVERITY_CRITICAL)
+            return  # no ACK
+        if msg.mission_type in (MISSION, mavlink.MAV_MISSION_TYPE_ALL):
+            self._store([], -1)
+        self._ack(endpoint, (msg.get_srcSystem(), msg.get_srcComponent()), ACCEPTED, msg.mission_type)
+
+    def on_set_current(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
+        if self.transfer is not None:
+            self._text("WPM: IGN WP CURR CMD: Busy\t", mavlink.MAV_SEVERITY_CRITICAL)
+        elif msg.seq >= len(self.items):
+            self._text("WPM: WP CURR CMD: Not in list\t", mavlink.MAV_SEVERITY_CRITICAL)
+        else:
+            self._set_current(msg.seq)
+
+    def tick(self, now: float) -> None:
+        """Re-request an item the client has not sent, and give up on a transfer gone silent."""
+        t = self.transfer
+        if t is None:
+            return
+        if now - t.last_received_s >= TIMEOUT_S:
+            self.transfer = None
+            self._text("Operation timeout\t", mavlink.MAV_SEVERITY_CRITICAL)
+        elif t.direction == "receiving" and now - t.last_request_s >= RETRY_S:
+            self._request(t, now)
+
+    @staticmethod
+    def _ack(endpoint: Endpoint, partner: tuple[int, int], result: int, mission_type: int = MISSION) -> None:
+        endpoint.send(mavlink.MAVLink_mission_ack_message(*partner, result, mission_type))
+
+
+class MissionReports:
+    """MISSION_CURRENT and MISSION_ITEM_REACHED as mavlink_mission.cpp's send() paces them: MISSION_CURRENT at once
+    when the current item changes and at 1 Hz, MISSION_ITEM_REACHED for each item reached and the last one again at 1 Hz,
+    ten more times. PX4 also sends MISSION_CURRENT (total 65535) without a mission; this simulator stays silent
+    then, so that flights without a mission send exactly what they sent before missions were emulated."""
+
+    REPEATS = 10
+
+    def __init__(self) -> None:
+        self.mission_state = mavlink.MISSION_STATE_UNKNOWN
+        self._current: int | None = None
+        self._current_s = -math.inf
+        self._reached = -1  # the last one sent, repeated at 1 Hz
+        self._reached_s = -math.inf
+        self._repeats_left = 0
+
+    def due(self, now: float, current: int, total: int, reached: list[int],
+            state_of: Callable[[int], tuple[int, int]]) -> list[mavlink.MAVLink_message]:
+        """The messages to send this tick; ``reached``: the items reached since the last call (emptied here),
+        ``state_of(previous)`` gives (mission_state, mission_mode)."""
+        news, reached[:] = list(reached), []
+        if total == 0:
+            self._current, self._repeats_left = None, 0
+            return []
+        self.mission_state, mode = state_of(self.mission_state)
+        out = []
+        if current != self._current or now - self._current_s >= 1.0:
+            out.append(mavlink.MAVLink_mission_current_message(current, total, self.mission_state, mode))
+            self._current, self._current_s = current, now
+        for seq in news:
+            out.append(mavlink.MAVLink_mission_item_reached_message(seq))
+            self._reached, self._reached_s, self._repeats_left = seq, now, self.REPEATS
+        if not news and self._repeats_left and now - self._reached_s >= 1.0:
+            out.append(mavlink.MAVLink_mission_item_reached_message(self._reached))
+            self._reached_s, self._repeats_left = now, self._repeats_left - 1
+        return out

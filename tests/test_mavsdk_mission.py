@@ -1,0 +1,109 @@
+"""MAVSDK's mission plugin flies a mission uploaded to the simulated PX4 over real UDP.
+
+The flow is MAVSDK-Python's ``examples/mission.py`` with the 4.x API: progress printed from a task, three waypoints
+at 25 m and 10 m/s (fly-through), return to launch after the mission, upload, wait for a global position and
+home, arm, start, and done once the vehicle has been in the air and landed again. MAVSDK turns that into seven
+MAVLink items (a waypoint and a DO_CHANGE_SPEED each, then RETURN_TO_LAUNCH; docs/sitl.md, "PX4 missions"), sent
+with MISSION_COUNT / MISSION_REQUEST_INT / MISSION_ITEM_INT / MISSION_ACK, and follows the flight through
+MISSION_CURRENT and MISSION_ITEM_REACHED. MAVSDK refuses the transfer outright against a vehicle whose
+AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_MISSION_INT, as the simulator's did before missions were emulated.
+"""
+from __future__ import annotations
+
+import asyncio
+import math
+
+import pytest
+
+from test_mavsdk_flight import SPEED, T, autopilot_at, bounded, first, vehicle_server
+
+from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402  (skipped with test_mavsdk_flight's importorskip)
+from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+
+pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
+WAYPOINTS_NE = ((40.0, 0.0), (40.0, 50.0), (0.0, 50.0))
+"""The example's three waypoints are about 40-60 m apart near Zurich; these are as far apart around our home."""
+ALTITUDE_M, SPEED_MPS = 25.0, 10.0
+
+
+def example_item(lat: float, lon: float) -> MissionItem:
+    """``MissionItem(lat, lon, 25, 10, True, nan, nan, CameraAction.NONE, nan, nan, nan, nan, nan,
+    VehicleAction.NONE)``, as examples/mission.py builds each of its three."""
+    return MissionItem(lat, lon, ALTITUDE_M, SPEED_MPS, True, math.nan, math.nan, MissionItem.CameraAction.NONE,
+                       math.nan, math.nan, math.nan, math.nan, math.nan, MissionItem.VehicleAction.NONE)
+
+
+async def fly_mission_example(port: int, server) -> dict:
+    vehicle = server.vehicle
+    flown: dict = {"progress": [], "track": [], "max_speed": 0.0}
+
+    async def sample_track():  # the true flight, for the assertions (not part of the example)
+        while True:
+            s = vehicle.state
+            flown["track"].append((s.north_m, s.east_m, -s.down_m))
+            flown["max_speed"] = max(flown["max_speed"], math.hypot(s.vn_mps, s.ve_mps))
+            await asyncio.sleep(0.05)
+
+    async with autopilot_at(port) as system:
+        mission, telemetry, action = MissionAsync(system), TelemetryAsync(system), ActionAsync(system)
+
+        async def print_mission_progress():
+            async for progress in mission.subscribe_mission_progress():
+                flown["progress"].append((progress.current, progress.total))
+
+        async def observe_is_in_air():
+            was_in_air = False
+            async for is_in_air in telemetry.subscribe_in_air():
+                was_in_air = was_in_air or is_in_air
+                if was_in_air and not is_in_air:
+                    return
+
+        progress_task = asyncio.ensure_future(print_mission_progress())
+        track_task = asyncio.ensure_future(sample_track())
+        termination = asyncio.ensure_future(observe_is_in_air())
+        try:
+            items = [example_item(*vehicle.frame.to_geodetic(n, e, 0.0)[:2]) for n, e in WAYPOINTS_NE]
+            await bounded(mission.set_return_to_launch_after_mission(True))
+            await bounded(mission.upload_mission(MissionPlan(items)))
+            flown["stored"] = list(vehicle.missions.items)
+            await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                        20, "global position and home")
+            await bounded(action.arm())
+            await bounded(mission.start_mission())
+            await asyncio.wait_for(termination, 150 / SPEED)
+            await asyncio.sleep(2.0)  # the last MISSION_CURRENT / MISSION_ITEM_REACHED repeats
+            flown["finished"] = await bounded(mission.is_mission_finished())
+            flown["downloaded"] = await bounded(mission.download_mission(), T)
+        finally:
+            for task in (progress_task, track_task, termination):
+                task.cancel()
+    return flown
+
+
+def test_mavsdk_mission_example_uploads_flies_the_waypoints_and_returns(udp_ports):
+    server, mavsdk_port = vehicle_server(udp_ports, seed=21, params={"RTL_RETURN_ALT": 30.0})
+    with server:
+        flown = asyncio.run(asyncio.wait_for(fly_mission_example(mavsdk_port, server), 200))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        vehicle = server.vehicle
+
+    stored = flown["stored"]  # what MAVSDK sent, as the vehicle parsed it
+    commands = [item.command for item in stored]
+    assert commands == [16, 178, 16, 178, 16, 178, 20]  # WAYPOINT, DO_CHANGE_SPEED, ..., RETURN_TO_LAUNCH
+    assert [item.params[1] for item in stored[1::2][:3]] == [SPEED_MPS] * 3
+    assert all(item.relative and item.z == ALTITUDE_M and item.params[1] == 3.0 for item in stored[0:6:2])
+
+    track = flown["track"]
+    for north, east in WAYPOINTS_NE:  # each waypoint passed within its 3 m acceptance radius, at 25 m
+        arrival = next(p for p in track if math.hypot(p[0] - north, p[1] - east) < 3.5)
+        assert arrival[2] == pytest.approx(ALTITUDE_M, abs=1.0)
+    assert flown["max_speed"] > 8.0  # DO_CHANGE_SPEED 10 m/s, not MPC_XY_CRUISE's 5
+    assert max(p[2] for p in track) < ALTITUDE_M + 6.0  # RTL_RETURN_ALT 30 m: the return climbs 5 m
+    assert flown["progress"][-1] == (3, 3) and flown["finished"] is True
+    downloaded = flown["downloaded"].mission_items  # MAVSDK's download_mission: the same three waypoints
+    assert [p.latitude_deg for p in downloaded] == pytest.approx(
+        [vehicle.frame.to_geodetic(n, e, 0.0)[0] for n, e in WAYPOINTS_NE], abs=1e-6)
+    assert [(p.relative_altitude_m, p.speed_m_s) for p in downloaded] == [(ALTITUDE_M, SPEED_MPS)] * 3
+    assert vehicle.state.on_ground and not vehicle.autopilot.armed
+    assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.5  # landed home

@@ -1,0 +1,253 @@
+"""PX4's mission protocol and Mission mode, over the in-memory link with a pymavlink client in lockstep.
+
+What PX4 does is in sitl_bridge/mission_protocol.py and sitl_bridge/px4_mission.py (docs/sitl.md, "PX4 missions",
+has the source lines): the upload handshake and its retries, the download, clear and set-current, the feasibility
+check (a mission outside the geofence is stored but cannot be started), the climb PX4 inserts before the first
+waypoint, hold times, the landing item, pausing and resuming, and the restart after a finished mission.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from test_autopilot_fences import texts
+from test_vehicle_commands import pilot  # noqa: F401  (the fixture: a lockstep vehicle with a GPS fix)
+
+from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.scripted_flight import LockstepPilot
+
+ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
+MISSION_START = mavlink.MAV_CMD_MISSION_START
+WAYPOINT, LAND, TAKEOFF = mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_CMD_NAV_TAKEOFF
+RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+
+def item(pilot: LockstepPilot, seq: int, north: float, east: float, alt: float, command: int = WAYPOINT,
+         hold_s: float = 0.0, radius_m: float = 2.0, frame: int = RELATIVE) -> mavlink.MAVLink_message:
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(north, east, 0.0)
+    return mavlink.MAVLink_mission_item_int_message(1, 1, seq, frame, command, int(seq == 0), 1, hold_s, radius_m,
+                                                    0.0, math.nan, round(lat * 1e7), round(lon * 1e7), alt)
+
+
+def since(pilot: LockstepPilot, start: int, kind: str) -> list:
+    return [m for m in pilot.received[start:] if m.get_type() == kind]
+
+
+def upload(pilot: LockstepPilot, items: list, mission_type: int = 0) -> tuple[int, list]:
+    """MISSION_COUNT, then each requested item: the final MISSION_ACK's type and the requests seen."""
+    start = len(pilot.received)
+    pilot.mav.mission_count_send(1, 1, len(items), mission_type)
+    requests: list = []
+    for _ in range(400):
+        pilot.step()
+        for m in pilot.received[start:]:
+            if m.get_type() == "MISSION_ACK":
+                return m.type, requests
+            if m.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+                requests.append(m)
+                pilot.mav.send(items[m.seq])
+        start = len(pilot.received)
+    raise AssertionError("no MISSION_ACK")
+
+
+def square(pilot: LockstepPilot, alt: float = 15.0) -> list:
+    return [item(pilot, 0, 30.0, 0.0, alt), item(pilot, 1, 30.0, 30.0, alt), item(pilot, 2, 0.0, 30.0, alt)]
+
+
+# ------------------------------------------------------------------ the protocol
+def test_upload_requests_every_item_as_int_and_acks_after_the_last(pilot):
+    result, requests = upload(pilot, square(pilot))
+    assert result == ACCEPTED
+    assert [(r.get_type(), r.seq, r.target_system, r.target_component) for r in requests] == [
+        ("MISSION_REQUEST_INT", seq, 255, 190) for seq in range(3)]
+    stored = pilot.vehicle.missions.items
+    assert [(i.command, i.relative, i.z) for i in stored] == [(WAYPOINT, True, 15.0)] * 3
+    assert pilot.vehicle.autopilot.mission_valid
+
+
+def test_an_unanswered_request_is_repeated_then_the_transfer_times_out_without_an_ack(pilot):
+    start = len(pilot.received)
+    pilot.mav.mission_count_send(1, 1, 2, 0)
+    for _ in range(int(6.0 / pilot.vehicle.dt_s)):
+        pilot.step()
+    requests = since(pilot, start, "MISSION_REQUEST_INT")
+    assert all(r.seq == 0 for r in requests) and 18 <= len(requests) <= 21  # every 0.25 s for 5 s
+    assert since(pilot, start, "MISSION_ACK") == []
+    assert "Operation timeout\t" in texts(pilot, start)
+    assert pilot.vehicle.missions.transfer is None and pilot.vehicle.missions.items == []
+
+
+def test_an_unsupported_item_aborts_the_upload_and_keeps_the_stored_mission(pilot):
+    assert upload(pilot, square(pilot))[0] == ACCEPTED
+    jump = mavlink.MAVLink_mission_item_int_message(1, 1, 1, mavlink.MAV_FRAME_MISSION, mavlink.MAV_CMD_DO_JUMP,
+                                                    0, 1, 0, 1, 0, 0, 0, 0, 0)
+    assert upload(pilot, [item(pilot, 0, 5, 5, 10), jump])[0] == mavlink.MAV_MISSION_UNSUPPORTED
+    local_frame = item(pilot, 0, 5, 5, 10, frame=mavlink.MAV_FRAME_LOCAL_NED)
+    assert upload(pilot, [local_frame])[0] == mavlink.MAV_MISSION_UNSUPPORTED_FRAME
+    speed_in_global_frame = item(pilot, 0, 5, 5, 10, command=mavlink.MAV_CMD_DO_CHANGE_SPEED)
+    assert upload(pilot, [speed_in_global_frame])[0] == mavlink.MAV_MISSION_UNSUPPORTED
+    assert len(pilot.vehicle.missions.items) == 3  # the square is still the mission
+    assert upload(pilot, [item(pilot, 0, 5, 5, 10)], mission_type=mavlink.MAV_MISSION_TYPE_FENCE)[0] == \
+        mavlink.MAV_MISSION_UNSUPPORTED  # fences are PX4's parameter fences here
+
+
+def test_float_items_switch_the_requests_to_float_and_a_client_nack_switches_back(pilot):
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(10.0, 0.0, 0.0)
+    float_items = [mavlink.MAVLink_mission_item_message(1, 1, seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, WAYPOINT,
+                                                        int(seq == 0), 1, 0, 2, 0, math.nan, lat, lon, 12.0)
+                   for seq in range(2)]
+    result, requests = upload(pilot, float_items)
+    assert result == ACCEPTED
+    assert [r.get_type() for r in requests] == ["MISSION_REQUEST_INT", "MISSION_REQUEST"]
+    assert pilot.vehicle.missions.items[1].x == pytest.approx(lat, abs=2e-6)  # a float32 latitude: ~10 cm
+    start = len(pilot.received)
+    pilot.mav.mission_count_send(1, 1, 1, 0)  # the float mode sticks ...
+    assert pilot.wait_message("MISSION_REQUEST").seq == 0
+    pilot.mav.mission_ack_send(1, 1, mavlink.MAV_MISSION_UNSUPPORTED, 0)  # ... until the client refuses it
+    assert pilot.wait_message("MISSION_REQUEST_INT").seq == 0
+    assert since(pilot, start, "MISSION_REQUEST_INT")
+
+
+def test_download_returns_the_items_and_clear_all_empties_the_mission(pilot):
+    assert upload(pilot, square(pilot, alt=18.0))[0] == ACCEPTED
+    pilot.mav.mission_request_list_send(1, 1, 0)
+    assert pilot.wait_message("MISSION_COUNT").count == 3
+    downloaded = []
+    for seq in range(3):
+        pilot.mav.mission_request_int_send(1, 1, seq, 0)
+        downloaded.append(pilot.wait_message("MISSION_ITEM_INT", match=lambda m, s=seq: m.seq == s))
+    pilot.mav.mission_ack_send(1, 1, ACCEPTED, 0)
+    sent = square(pilot, alt=18.0)
+    assert [(m.frame, m.command, m.current, m.x, m.y, m.z) for m in downloaded] == [
+        (RELATIVE, WAYPOINT, int(m.seq == 0), m.x, m.y, 18.0) for m in sent]
+    pilot.mav.mission_clear_all_send(1, 1, 0)
+    assert pilot.wait_message("MISSION_ACK").type == ACCEPTED
+    pilot.mav.mission_request_list_send(1, 1, 0)
+    assert pilot.wait_message("MISSION_COUNT").count == 0
+    start = len(pilot.received)
+    for _ in range(int(2.0 / pilot.vehicle.dt_s)):
+        pilot.step()
+    assert since(pilot, start, "MISSION_CURRENT") == []  # no mission, no MISSION_CURRENT (docs/sitl.md)
+
+
+# ------------------------------------------------------------------ feasibility
+def test_a_mission_beyond_the_geofence_is_stored_but_cannot_start(pilot):
+    pilot.set_param("GF_MAX_HOR_DIST", 100.0)
+    start = len(pilot.received)
+    result, _ = upload(pilot, [item(pilot, 0, 30, 0, 15), item(pilot, 1, 150, 0, 15)])
+    assert result == ACCEPTED  # PX4 acknowledges the transfer; the navigator then marks it invalid
+    assert "Geofence violation for waypoint 2\t" in texts(pilot, start)  # PX4 counts from 1
+    assert not pilot.vehicle.autopilot.mission_valid
+    assert pilot.wait_message("MISSION_CURRENT").mission_state == mavlink.MISSION_STATE_NO_MISSION
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_DENIED
+    assert "Mission start denied! No valid mission\t" in texts(pilot, start)
+    assert pilot.set_mode(FlightMode.MISSION) == mavlink.MAV_RESULT_ACCEPTED  # disarmed: the switch is allowed ...
+    assert pilot.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    assert not pilot.vehicle.autopilot.armed  # ... arming in it is not
+
+
+def test_a_takeoff_item_below_home_or_after_a_waypoint_makes_the_mission_invalid(pilot):
+    start = len(pilot.received)
+    assert upload(pilot, [item(pilot, 0, 0, 0, -5.0, command=TAKEOFF), item(pilot, 1, 20, 0, 10)])[0] == ACCEPTED
+    assert "Mission rejected: Takeoff altitude below home altitude!\t" in texts(pilot, start)
+    start = len(pilot.received)
+    assert upload(pilot, [item(pilot, 0, 20, 0, 10), item(pilot, 1, 0, 0, 10, command=TAKEOFF)])[0] == ACCEPTED
+    # exactly 50 bytes: one full STATUSTEXT, which a reader joins only once another text follows
+    assert "Mission rejected: takeoff not first waypoint item\t" in [m.text for m in since(pilot, start, "STATUSTEXT")]
+    assert not pilot.vehicle.autopilot.mission_valid
+
+
+# ------------------------------------------------------------------ flying it
+def test_mission_start_climbs_first_then_flies_each_waypoint_and_loiters_at_the_end(pilot):
+    v = pilot.vehicle
+    items = square(pilot)
+    items[1] = item(pilot, 1, 30.0, 30.0, 15.0, hold_s=3.0)
+    assert upload(pilot, items)[0] == ACCEPTED
+    start = len(pilot.received)
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_ACCEPTED
+    assert v.autopilot.armed and v.autopilot.mode is FlightMode.MISSION
+    pilot.wait_for(lambda: -v.state.down_m > 5.0, 10.0, "climbing")
+    assert math.hypot(v.state.north_m, v.state.east_m) < 0.5  # straight up first ("Climb to 15.0 meters ...")
+    assert pilot.wait_message("EXTENDED_SYS_STATE").landed_state == mavlink.MAV_LANDED_STATE_TAKEOFF
+    pilot.wait_for(lambda: v.autopilot.mission_finished, 60.0, "the mission")
+    reached = [m.seq for m in since(pilot, start, "MISSION_ITEM_REACHED")]
+    assert sorted(set(reached)) == [0, 1, 2]  # no REACHED for the inserted climb
+    at_1 = next(i for i, m in enumerate(pilot.received[start:]) if m.get_type() == "MISSION_ITEM_REACHED"
+                and m.seq == 1)
+    at_0 = next(i for i, m in enumerate(pilot.received[start:]) if m.get_type() == "MISSION_ITEM_REACHED"
+                and m.seq == 0)
+    assert at_1 > at_0
+    assert "Climb to 15.0 meters above home\t" in texts(pilot, start)
+    assert "Mission finished, loitering\t" in texts(pilot, start)
+    assert math.hypot(v.state.north_m - 0.0, v.state.east_m - 30.0) < 2.0
+    assert pilot.wait_message("MISSION_CURRENT").mission_state == mavlink.MISSION_STATE_COMPLETE
+    for _ in range(int(5.0 / v.dt_s)):  # it stays in Mission mode, holding
+        pilot.step()
+    assert v.autopilot.mode is FlightMode.MISSION and math.hypot(v.state.north_m, v.state.east_m - 30.0) < 2.0
+
+
+def test_the_hold_time_keeps_the_vehicle_at_its_waypoint(pilot):
+    v = pilot.vehicle
+    items = [item(pilot, 0, 20.0, 0.0, 10.0, hold_s=6.0), item(pilot, 1, 20.0, 40.0, 10.0)]
+    assert upload(pilot, items)[0] == ACCEPTED
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: v.autopilot._item_reached_s is not None, 40.0, "at waypoint 0")
+    arrived = v.time_s
+    assert math.hypot(v.state.north_m - 20.0, v.state.east_m) <= 2.0 and v.autopilot.mission_current == 0
+    pilot.wait_for(lambda: v.autopilot.mission_current == 1, 20.0, "leaving waypoint 0")
+    assert v.time_s - arrived == pytest.approx(6.0, abs=0.05)  # held for param1, then on
+    assert math.hypot(v.state.north_m - 20.0, v.state.east_m) < 2.0  # still there when it moves on
+
+
+def test_a_land_item_lands_at_its_point_and_the_vehicle_disarms(pilot):
+    v = pilot.vehicle
+    items = [item(pilot, 0, 20.0, 0.0, 12.0), item(pilot, 1, 20.0, 25.0, 0.0, command=LAND)]
+    assert upload(pilot, items)[0] == ACCEPTED
+    start = len(pilot.received)
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: v.autopilot.mission_current == 1 and v.autopilot._landing, 60.0, "over the land point")
+    assert -v.state.down_m > 10.0  # flew there at its altitude before descending
+    assert pilot.wait_message("EXTENDED_SYS_STATE").landed_state == mavlink.MAV_LANDED_STATE_LANDING
+    pilot.wait_for(lambda: not v.autopilot.armed, 60.0, "landed and disarmed")
+    assert math.hypot(v.state.north_m - 20.0, v.state.east_m - 25.0) < 1.5
+    assert "Mission finished, landed\t" in texts(pilot, start)
+
+
+def test_pause_in_hold_resumes_at_the_same_item_and_a_finished_mission_restarts_after_disarming(pilot):
+    v = pilot.vehicle
+    items = [item(pilot, 0, 20.0, 0.0, 10.0), item(pilot, 1, 20.0, 60.0, 10.0), item(pilot, 2, 0, 0, 0, LAND)]
+    assert upload(pilot, items)[0] == ACCEPTED
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: v.autopilot.mission_current == 1 and v.state.east_m > 15.0, 60.0, "on the second leg")
+    assert pilot.set_mode(FlightMode.HOLD) == mavlink.MAV_RESULT_ACCEPTED  # MAVSDK's pause_mission
+    paused_at = (v.state.north_m, v.state.east_m)
+    for _ in range(int(4.0 / v.dt_s)):
+        pilot.step()
+    assert math.hypot(v.state.north_m - paused_at[0], v.state.east_m - paused_at[1]) < 4.0
+    assert pilot.wait_message("MISSION_CURRENT").mission_state == mavlink.MISSION_STATE_PAUSED
+    assert pilot.set_mode(FlightMode.MISSION) == mavlink.MAV_RESULT_ACCEPTED
+    assert v.autopilot.mission_current == 1  # resumed, not restarted
+    pilot.wait_for(lambda: not v.autopilot.armed, 120.0, "landed home and disarmed")
+    assert v.autopilot.mission_finished and v.autopilot.mode is FlightMode.HOLD  # disarming on the ground: Hold
+    assert pilot.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
+    assert pilot.set_mode(FlightMode.MISSION) == mavlink.MAV_RESULT_ACCEPTED
+    assert v.autopilot.mission_current == 0 and not v.autopilot.mission_finished  # checkMissionRestart
+    pilot.wait_for(lambda: v.autopilot.mission_reached == 0, 60.0, "the first waypoint again")
+
+
+def test_set_current_jumps_and_mission_current_says_so(pilot):
+    v = pilot.vehicle
+    assert upload(pilot, square(pilot))[0] == ACCEPTED
+    pilot.mav.mission_set_current_send(1, 1, 2)
+    assert pilot.wait_message("MISSION_CURRENT", match=lambda m: m.seq == 2).total == 3
+    assert pilot.command(MISSION_START, -1, 0) == mavlink.MAV_RESULT_ACCEPTED  # -1: from the current item
+    pilot.wait_for(lambda: v.autopilot.mission_finished, 60.0, "the mission")
+    assert v.autopilot.mission_reached == 2
+    assert math.hypot(v.state.north_m, v.state.east_m - 30.0) < 2.5
+    start = len(pilot.received)
+    pilot.mav.mission_set_current_send(1, 1, 7)
+    for _ in range(20):
+        pilot.step()
+    assert "WPM: WP CURR CMD: Not in list\t" in texts(pilot, start)
