@@ -229,6 +229,8 @@ class MissionTransfer:
     def on_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         partner = (msg.get_srcSystem(), msg.get_srcComponent())
         t = self.transfer
+        if t is not None and t.direction == "sending" and t.next_seq >= t.count:
+            t = self.transfer = None  # every item went out: a new list request need not wait for the lost ACK
         if t is not None and not (t.direction == "sending" and t.partner == partner):
             self._text("Mission download request ignored, already active\t", mavlink.MAV_SEVERITY_INFO)
             return

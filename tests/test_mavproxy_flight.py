@@ -156,6 +156,39 @@ def test_mavproxy_sees_px4s_geofence_hold_and_joins_its_chunked_text(udp_ports, 
         return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
 
 
+def test_mavproxy_loads_lists_and_flies_a_px4_mission(udp_ports, tmp_path):
+    """``wp load`` of a QGC WPL 110 file (three waypoints at 15 m above home), ``wp list`` back, arm and Mission
+    mode: the vehicle climbs, flies the three and loiters at the last. MAVProxy sends no MISSION_ACK after a
+    download, so PX4 (and the simulator) says "Operation timeout" 5 s later (mavlink_mission.cpp send())."""
+    with px4_and_mavproxy(udp_ports, tmp_path) as (vehicle, mavproxy):
+        corners = ((30.0, 0.0), (30.0, 30.0), (0.0, 30.0))
+        lines = ["QGC WPL 110"]
+        for seq, (north, east) in enumerate(corners):  # seq current frame command p1-p4 lat lon alt autocontinue
+            lat, lon, _ = vehicle.frame.to_geodetic(north, east, 0.0)
+            lines.append(f"{seq}\t{int(seq == 0)}\t3\t16\t0\t2\t0\t0\t{lat:.8f}\t{lon:.8f}\t15\t1")
+        (tmp_path / "square.txt").write_text("\n".join(lines) + "\n")
+        mavproxy.expect("Detected vehicle 1:1")
+        mavproxy.send(f"wp load {tmp_path / 'square.txt'}")
+        mavproxy.expect("Sent all 3 waypoints")
+        mavproxy.expect("MISSION_ACK: TYPE_MISSION: ACCEPTED")
+        assert [(item.command, item.relative, item.z) for item in vehicle.missions.items] == [(16, True, 15.0)] * 3
+        mavproxy.send("wp list")
+        listed = [mavproxy.expect("16 6 ") for _ in corners]  # command 16, GLOBAL_RELATIVE_ALT_INT
+        assert all("15.000000" in line and "p2=2.0" in line for line in listed)
+        mavproxy.send("arm throttle")
+        mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mavproxy.send("long DO_SET_MODE 29 4 4")  # MAVProxy's "mode MISSION" wants a number for PX4
+        mavproxy.expect("DO_SET_MODE: ACCEPTED")
+        mavproxy.expect("Climb to 15.0 meters above home")
+        assert vehicle.autopilot.mode is FlightMode.MISSION
+        wait_until(lambda: vehicle.autopilot.mission_finished, 60, "the three waypoints")
+        mavproxy.expect("waypoint 2")  # MAVProxy prints each MISSION_ITEM_REACHED
+        mavproxy.expect("Mission finished, loitering")
+        assert math.hypot(vehicle.state.north_m, vehicle.state.east_m - 30.0) < 2.5
+        assert -vehicle.state.down_m == pytest.approx(15.0, abs=1.0)
+        return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
+
+
 def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tmp_path):
     tcp_port, api_port, api_remote, _ = udp_ports
     ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)
