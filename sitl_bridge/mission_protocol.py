@@ -16,8 +16,9 @@ missions", has the line references and what differs from v1.14):
 * PX4 answers in the ``_INT`` form until a client uses the float messages (a sticky "int mode"), and switches form
   when a client answers a request with MISSION_ACK UNSUPPORTED.
 
-Only the MISSION type is stored: a fence or rally upload gets MAV_MISSION_UNSUPPORTED (PX4 stores them; this
-simulator's fences are PX4's parameter fences, ``sitl_bridge.fences``), and their download lists nothing.
+The MISSION and FENCE types are stored (a fence: polygon vertices and circles, inclusion or exclusion, at most 64
+items; a polygon of fewer than 3 vertices is an ERROR; ``sitl_bridge.fences`` flies it); a rally upload gets
+MAV_MISSION_UNSUPPORTED and its download lists nothing.
 """
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ RETRY_S = 0.25  # MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: re-request an item afte
 TIMEOUT_S = 5.0  # MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a transfer silent this long is abandoned
 MAX_ITEMS = 500  # CONFIG_NUM_MISSION_ITMES_SUPPORTED's default (PX4 SITL builds allow 10,000)
 
-MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+MISSION, FENCE = mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENCE
+CAPACITY = {MISSION: MAX_ITEMS, FENCE: 64}  # DM_KEY_FENCE_POINTS_MAX
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 
 ABSOLUTE_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
@@ -46,6 +48,11 @@ POSITION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, 
                      mavlink.MAV_CMD_NAV_LOITER_TIME, mavlink.MAV_CMD_NAV_LOITER_UNLIM)
 NAVIGATION_COMMANDS = (mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH,
                        mavlink.MAV_CMD_NAV_DELAY)
+FENCE_COMMANDS = (mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                  mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+                  mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION)
+POLYGON_VERTICES = (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                    mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
 # Camera and gimbal items (what MAVSDK's MissionItem adds for its camera and gimbal fields): stored, and passed over
 # in flight with a log line, since the simulator has no camera triggering or gimbal.
 PAYLOAD_COMMANDS = (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_IMAGE_STOP_CAPTURE,
@@ -72,12 +79,17 @@ class MissionItem:
     autocontinue: bool = True
 
 
-def parse_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
-    """A MISSION_ITEM(_INT) as PX4's parse_mavlink_mission_item reads it, or the MAV_MISSION_RESULT refusing it."""
+def parse_item(msg: mavlink.MAVLink_message, mission_type: int = MISSION) -> MissionItem | int:
+    """A MISSION_ITEM(_INT) of a mission or fence upload as PX4's parse_mavlink_mission_item and
+    handle_mission_item_both read it, or the MAV_MISSION_RESULT refusing it."""
     is_int = msg.get_type() == "MISSION_ITEM_INT"
     params = (msg.param1, msg.param2, msg.param3, msg.param4)
+    if (mission_type == FENCE) != (msg.command in FENCE_COMMANDS):
+        return mavlink.MAV_MISSION_ERROR  # a fence item in a mission, or anything else in a fence
+    if msg.command in POLYGON_VERTICES and not (math.isfinite(msg.param1) and msg.param1 + 0.5 >= 3):
+        return mavlink.MAV_MISSION_ERROR  # vertex_count < 3
     if msg.frame in ABSOLUTE_FRAMES + RELATIVE_FRAMES and (is_int or msg.frame not in INT_ONLY_FRAMES):
-        if msg.command not in POSITION_COMMANDS:
+        if msg.command not in POSITION_COMMANDS + FENCE_COMMANDS:
             return mavlink.MAV_MISSION_UNSUPPORTED
         scale = 1e-7 if is_int else 1.0
         # Not in PX4, which stores what it gets: a position that is not one would fly the simulator into NaNs
@@ -97,8 +109,8 @@ def parse_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
     return mavlink.MAV_MISSION_UNSUPPORTED_FRAME
 
 
-def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, int],
-                 as_int: bool) -> mavlink.MAVLink_message:
+def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, int], as_int: bool,
+                 mission_type: int = MISSION) -> mavlink.MAVLink_message:
     """The item as PX4's format_mavlink_mission_item sends it in a download."""
     if item.positional:
         frame = RELATIVE_FRAMES[as_int] if item.relative else ABSOLUTE_FRAMES[as_int]
@@ -108,9 +120,9 @@ def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, 
     if as_int:
         x, y = (_int32(x * 1e7), _int32(y * 1e7)) if item.positional else (_int32(x), _int32(y))
         return mavlink.MAVLink_mission_item_int_message(*target, seq, frame, item.command, int(current),
-                                                        int(item.autocontinue), *item.params, x, y, item.z, MISSION)
+                                                        int(item.autocontinue), *item.params, x, y, item.z, mission_type)
     return mavlink.MAVLink_mission_item_message(*target, seq, frame, item.command, int(current),
-                                                int(item.autocontinue), *item.params, x, y, item.z, MISSION)
+                                                int(item.autocontinue), *item.params, x, y, item.z, mission_type)
 
 
 def _int32(value: float) -> int:
@@ -125,6 +137,7 @@ class _Transfer:
     direction: str
     endpoint: Endpoint
     partner: tuple[int, int]  # the client's system and component
+    mission_type: int
     count: int
     next_seq: int = 0
     items: list[MissionItem] | None = None
@@ -134,24 +147,37 @@ class _Transfer:
 
 
 class MissionTransfer:
-    """The mission protocol of one vehicle: the stored mission and at most one transfer at a time.
+    """The mission protocol of one vehicle: the stored mission and fence, and at most one transfer at a time.
 
-    ``on_mission(items, current_seq)`` hands a completed upload (or a clear: no items) to the navigator, with the
-    uploaded item marked current (-1: none); ``current_seq()`` reads the navigator's current item for a download;
-    ``set_current(seq)`` asks the navigator to jump; ``text(text, severity)`` sends PX4's STATUSTEXTs.
+    ``on_mission(items, current_seq)`` hands a completed mission upload (or a clear: no items) to the navigator,
+    with the uploaded item marked current (-1: none); ``on_fence(items)`` a fence; ``current_seq()`` reads the
+    navigator's current item for a download; ``set_current(seq)`` asks the navigator to jump; ``text(text,
+    severity)`` sends PX4's STATUSTEXTs.
     """
 
-    def __init__(self, on_mission: Callable[[list[MissionItem], int], None], current_seq: Callable[[], int],
+    def __init__(self, on_mission: Callable[[list[MissionItem], int], None],
+                 on_fence: Callable[[list[MissionItem]], None], current_seq: Callable[[], int],
                  set_current: Callable[[int], None], text: Callable[[str, int], None]):
-        self.items: list[MissionItem] = []
+        self.stored: dict[int, list[MissionItem]] = {MISSION: [], FENCE: []}
         self.int_mode = True  # PX4 main; v1.14 started in float mode (docs/sitl.md)
         self.transfer: _Transfer | None = None
-        self._last_upload: tuple[tuple[int, int], int] | None = None  # (client, count) of the last upload's ACK
-        self._on_mission, self._current_seq, self._set_current, self._text = on_mission, current_seq, set_current, text
+        self._last_upload: tuple[tuple[int, int], int, int] | None = None  # (client, type, count) of the last ACK
+        self._on_mission, self._on_fence = on_mission, on_fence
+        self._current_seq, self._set_current, self._text = current_seq, set_current, text
+
+    @property
+    def items(self) -> list[MissionItem]:
+        """The stored mission."""
+        return self.stored[MISSION]
+
+    @property
+    def fence(self) -> list[MissionItem]:
+        """The stored fence items."""
+        return self.stored[FENCE]
 
     # ------------------------------------------------------------------ upload
     def on_count(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        partner, kind = (msg.get_srcSystem(), msg.get_srcComponent()), msg.mission_type
         busy = self.transfer
         if busy is not None:
             if busy.direction == "receiving" and busy.partner == partner and busy.next_seq == 0:
@@ -159,40 +185,40 @@ class MissionTransfer:
             else:
                 self._text("WPM: REJ. CMD: Busy\t" if busy.direction == "receiving" else "WPM: IGN MISSION_COUNT: Busy\t",
                            mavlink.MAV_SEVERITY_CRITICAL)
-                self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, msg.mission_type)
+                self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, kind)
             return
-        if msg.mission_type != MISSION:
-            known = msg.mission_type in (mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY)
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_UNSUPPORTED if known else mavlink.MAV_MISSION_INVALID,
-                      msg.mission_type)
+        if kind not in CAPACITY:
+            result = mavlink.MAV_MISSION_UNSUPPORTED if kind == mavlink.MAV_MISSION_TYPE_RALLY else \
+                mavlink.MAV_MISSION_INVALID
+            self._ack(endpoint, partner, result, kind)
             return
-        if msg.count > MAX_ITEMS:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_NO_SPACE)
+        if msg.count > CAPACITY[kind]:
+            self._ack(endpoint, partner, mavlink.MAV_MISSION_NO_SPACE, kind)
             return
-        if msg.count == 0:  # an empty upload clears the mission
-            self._store([], -1)
-            self._ack(endpoint, partner, ACCEPTED)
+        if msg.count == 0:  # an empty upload clears
+            self._store(kind, [], -1)
+            self._ack(endpoint, partner, ACCEPTED, kind)
             return
-        self.transfer = _Transfer("receiving", endpoint, partner, msg.count, items=[], last_received_s=now)
+        self.transfer = _Transfer("receiving", endpoint, partner, kind, msg.count, items=[], last_received_s=now)
         self._request(self.transfer, now)
 
     def on_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         self.int_mode = msg.get_type() == "MISSION_ITEM_INT"
         t, partner = self.transfer, (msg.get_srcSystem(), msg.get_srcComponent())
-        if t is None and self._last_upload == (partner, msg.seq + 1):
-            self._ack(endpoint, partner, ACCEPTED)  # the last item again: the client lost our ACK
+        if t is None and self._last_upload == (partner, msg.mission_type, msg.seq + 1):
+            self._ack(endpoint, partner, ACCEPTED, msg.mission_type)  # the last item again: our ACK was lost
             return
         if t is None or t.direction != "receiving":
             self._text("IGN MISSION_ITEM: No transfer\t", mavlink.MAV_SEVERITY_CRITICAL)
             self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, msg.mission_type)
             return
-        if msg.mission_type != MISSION:
+        if msg.mission_type != t.mission_type:
             self._abort(mavlink.MAV_MISSION_ERROR)
             return
         if msg.seq != t.next_seq:
             return  # PX4 ignores it; the retry asks for the one it wants
         t.last_received_s = now
-        item = parse_item(msg)
+        item = parse_item(msg, t.mission_type)
         if isinstance(item, int):
             self._text("IGN MISSION_ITEM: Invalid item\t", mavlink.MAV_SEVERITY_CRITICAL)
             self._abort(item)
@@ -206,39 +232,42 @@ class MissionTransfer:
             self._request(t, now)
             return
         self.transfer = None
-        self._store(t.items, t.current_seq)
-        self._last_upload = (t.partner, t.count)
-        self._ack(t.endpoint, t.partner, ACCEPTED)
+        self._store(t.mission_type, t.items, t.current_seq)
+        self._last_upload = (t.partner, t.mission_type, t.count)
+        self._ack(t.endpoint, t.partner, ACCEPTED, t.mission_type)
 
     def _request(self, t: _Transfer, now: float) -> None:
         cls = mavlink.MAVLink_mission_request_int_message if self.int_mode else mavlink.MAVLink_mission_request_message
-        t.endpoint.send(cls(*t.partner, t.next_seq, MISSION))
+        t.endpoint.send(cls(*t.partner, t.next_seq, t.mission_type))
         t.last_request_s = now
 
-    def _store(self, items: list[MissionItem], current_seq: int) -> None:
-        self.items, self._last_upload = list(items), None
-        self._on_mission(self.items, current_seq)
+    def _store(self, kind: int, items: list[MissionItem], current_seq: int) -> None:
+        self.stored[kind], self._last_upload = list(items), None
+        if kind == MISSION:
+            self._on_mission(self.items, current_seq)
+        else:
+            self._on_fence(self.fence)
 
     def _abort(self, result: int) -> None:
         t = self.transfer
         assert t is not None
         self.transfer = None
-        self._ack(t.endpoint, t.partner, result)
+        self._ack(t.endpoint, t.partner, result, t.mission_type)
 
     # ------------------------------------------------------------------ download
     def on_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        partner, kind = (msg.get_srcSystem(), msg.get_srcComponent()), msg.mission_type
         t = self.transfer
         if t is not None and t.direction == "sending" and t.next_seq >= t.count:
             t = self.transfer = None  # every item went out: a new list request need not wait for the lost ACK
-        if t is not None and not (t.direction == "sending" and t.partner == partner):
+        if t is not None and not (t.direction == "sending" and t.partner == partner and t.mission_type == kind):
             self._text("Mission download request ignored, already active\t", mavlink.MAV_SEVERITY_INFO)
             return
-        count = len(self.items) if msg.mission_type == MISSION else 0
+        count = len(self.stored.get(kind, []))
         self.transfer = None
         if count:
-            self.transfer = _Transfer("sending", endpoint, partner, count, last_received_s=now)
-        endpoint.send(mavlink.MAVLink_mission_count_message(*partner, count, msg.mission_type))
+            self.transfer = _Transfer("sending", endpoint, partner, kind, count, last_received_s=now)
+        endpoint.send(mavlink.MAVLink_mission_count_message(*partner, count, kind))
 
     def on_request(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         self.int_mode = msg.get_type() == "MISSION_REQUEST_INT"
@@ -251,12 +280,13 @@ class MissionTransfer:
         if msg.seq not in (t.next_seq, t.next_seq - 1) or msg.seq >= t.count:
             self.transfer = None
             self._text("WPM: REJ. CMD: Req. WP was unexpected\t", mavlink.MAV_SEVERITY_CRITICAL)
-            self._ack(endpoint, t.partner, mavlink.MAV_MISSION_ERROR)
+            self._ack(endpoint, t.partner, mavlink.MAV_MISSION_ERROR, t.mission_type)
             return
         t.last_received_s = now
         t.next_seq = msg.seq + 1
-        current = msg.seq == self._current_seq()
-        endpoint.send(item_message(self.items[msg.seq], msg.seq, current, t.partner, self.int_mode))
+        current = t.mission_type == MISSION and msg.seq == self._current_seq()
+        endpoint.send(item_message(self.stored[t.mission_type][msg.seq], msg.seq, current, t.partner, self.int_mode,
+                                   t.mission_type))
 
     def on_ack(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         t = self.transfer
@@ -273,8 +303,9 @@ class MissionTransfer:
         if self.transfer is not None:
             self._text("WPM: IGN CLEAR CMD: Busy\t", mavlink.MAV_SEVERITY_CRITICAL)
             return  # no ACK
-        if msg.mission_type in (MISSION, mavlink.MAV_MISSION_TYPE_ALL):
-            self._store([], -1)
+        for kind in CAPACITY:
+            if msg.mission_type in (kind, mavlink.MAV_MISSION_TYPE_ALL):
+                self._store(kind, [], -1)
         self._ack(endpoint, (msg.get_srcSystem(), msg.get_srcComponent()), ACCEPTED, msg.mission_type)
 
     def on_set_current(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:

@@ -8,7 +8,7 @@ missions", has the line references):
   already); it marks the mission invalid, so Mission mode cannot be entered armed, arming in it is refused, and
   MAV_CMD_MISSION_START is DENIED. Checked here: a position fix (home), a takeoff above home and before any other
   position item, no landing as the first item while landed, every position item inside the geofence
-  (GF_MAX_HOR_DIST / GF_MAX_VER_DIST). A first waypoint further than MIS_DIST_1WP from home only warns.
+  (GF_MAX_HOR_DIST / GF_MAX_VER_DIST and the uploaded areas, whatever GF_ACTION says). A first waypoint further than MIS_DIST_1WP from home only warns.
 * **flying it** (``mission_base.cpp``, ``mission.cpp``, ``mission_block.cpp``): starting below the next position
   item's altitude, PX4 first climbs straight up to it (a takeoff when landed; no MISSION_ITEM_REACHED for that
   climb), then flies each item: a position item is reached within its param2 (else NAV_ACC_RAD) horizontally and
@@ -111,17 +111,9 @@ class Px4MissionMode:
                     return ["Mission rejected: Takeoff altitude below home altitude!\t"]
             seen_position = seen_position or item.positional
         for index, item in enumerate(self.mission_items):
-            if item.positional and self._outside_geofence(*self._item_ned(item)):
+            if item.positional and self.outside_fence(*self._item_ned(item)):  # whatever GF_ACTION says
                 return [f"Geofence violation for waypoint {index + 1}\t"]  # counted from 1
         return []
-
-    def _outside_geofence(self, north: float, east: float, down: float) -> bool:
-        if not int(self.params["GF_ACTION"]):
-            return False
-        home_n, home_e, home_d = self.home_ned
-        max_hor, max_ver = self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"]
-        return ((max_hor > 0 and math.hypot(north - home_n, east - home_e) >= max_hor)
-                or (max_ver > 0 and home_d - down >= max_ver))
 
     def _first_waypoint_distance_m(self) -> float | None:
         item = next((i for i in self.mission_items if i.positional), None)

@@ -88,10 +88,11 @@ class SimulatedVehicle(MessageHandlers):
         self.setup_signing_refused = 0
         if config.signing_key is not None:
             self._enable_signing(config.signing_key)
-        # PX4's mission protocol (the ArduPilot personality answers guided-mode items only): the stored mission
-        # outlives a reboot, as PX4's dataman does
+        # PX4's mission protocol (the ArduPilot personality answers guided-mode items only): the stored mission and
+        # fence outlive a reboot, as PX4's dataman does
         self.missions: MissionTransfer | None = None if self.is_ardupilot else MissionTransfer(
             on_mission=lambda items, current: self.autopilot.load_mission(items, current, self.time_s, self.state),
+            on_fence=lambda items: self.autopilot.load_fence(items, self.time_s, self.state),
             current_seq=lambda: self.autopilot.mission_current,
             set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
             text=lambda text, severity: self.autopilot._event(self.time_s, text, severity))
@@ -274,9 +275,11 @@ class SimulatedVehicle(MessageHandlers):
         self.origin_ned = here
         self._set_home(here)
         self.autopilot.home_changed = False  # just announced
-        if self.missions is not None and self.missions.items:
-            self.missions.transfer = None  # a transfer does not survive the reboot; the stored mission does
-            self.autopilot.load_mission(self.missions.items, current, self.time_s, state)
+        if self.missions is not None:  # a transfer does not survive the reboot; the stored mission and fence do
+            self.missions.transfer = None
+            self.autopilot.load_fence(self.missions.fence, self.time_s, state)
+            if self.missions.items:
+                self.autopilot.load_mission(self.missions.items, current, self.time_s, state)
         self.log(f"autopilot booted at {self.time_s:.2f} s; home and origin re-set at "
                  f"{here[0]:.1f} m N, {here[1]:.1f} m E, {-here[2]:.1f} m up")
 

@@ -88,6 +88,23 @@ def test_px4_horizontal_breach_holds_where_it_was_detected_and_says_why():
     assert distance_from_home(pilot) < breach_at + 5.0 and math.hypot(*pilot.vehicle.ground_velocity[:2]) < 0.3
 
 
+def test_px4_breach_during_a_reposition_stops_there_although_the_vehicle_is_already_in_hold():
+    """MAVSDK's goto_location is DO_REPOSITION, which flies in Hold: the fence's Hold action changes no mode then,
+    and until 2026-12-07 the vehicle flew on to the target beyond the fence. Navigator::geofence_breach_check
+    repositions to the current position on a breach, whatever the mode."""
+    pilot = px4_in_offboard({"GF_MAX_HOR_DIST": 60.0}, stream=(0.0, 0.0, 0.0, LOCAL_NED))
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(150.0, 0.0, 0.0)
+    pilot.mav.command_int_send(1, 1, mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_CMD_DO_REPOSITION, 0, 0,
+                               -1, 1, 0, math.nan, round(lat * 1e7), round(lon * 1e7), math.nan)
+    pilot.stream = None
+    pilot.wait_for(lambda: PX4_DISTANCE_TEXT in texts(pilot), 60.0, "the breach")
+    breach_at = distance_from_home(pilot)
+    assert pilot.vehicle.autopilot.mode is FlightMode.HOLD
+    fly(pilot, 15.0)
+    assert distance_from_home(pilot) < breach_at + 5.0 < 70.0  # stopped at the fence, not 150 m out
+    assert math.hypot(*pilot.vehicle.ground_velocity[:2]) < 0.3
+
+
 def test_px4_hold_is_left_by_a_mode_switch_and_acts_again_only_on_a_new_breach():
     pilot = px4_in_offboard({"GF_MAX_HOR_DIST": 60.0})
     pilot.wait_for(lambda: pilot.heartbeat_mode() is FlightMode.HOLD, 30.0, "geofence hold")

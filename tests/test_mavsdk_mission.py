@@ -7,6 +7,8 @@ MAVLink items (a waypoint and a DO_CHANGE_SPEED each, then RETURN_TO_LAUNCH; doc
 with MISSION_COUNT / MISSION_REQUEST_INT / MISSION_ITEM_INT / MISSION_ACK, and follows the flight through
 MISSION_CURRENT and MISSION_ITEM_REACHED. MAVSDK refuses the transfer outright against a vehicle whose
 AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_MISSION_INT, as the simulator's did before missions were emulated.
+MAVSDK-Python's ``examples/geofence.py`` uploads a fence the same way (mission type FENCE), and the vehicle then
+keeps to it.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import pytest
 from test_mavsdk_flight import SPEED, T, autopilot_at, bounded, first, vehicle_server
 
 from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402  (skipped with test_mavsdk_flight's importorskip)
+from mavsdk.asyncio.plugins.geofence import FenceType, GeofenceAsync, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 
@@ -107,3 +110,53 @@ def test_mavsdk_mission_example_uploads_flies_the_waypoints_and_returns(udp_port
     assert [(p.relative_altitude_m, p.speed_m_s) for p in downloaded] == [(ALTITUDE_M, SPEED_MPS)] * 3
     assert vehicle.state.on_ground and not vehicle.autopilot.armed
     assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.5  # landed home
+
+
+async def fly_geofence_example(port: int, server) -> list[str]:
+    """examples/geofence.py (home, a second's wait, a square of +-0.0001 degrees around it, upload), then a flight
+    out of the square; returns the STATUSTEXTs MAVSDK heard."""
+    heard: list[str] = []
+    async with autopilot_at(port) as system:
+        telemetry, geofence, action = TelemetryAsync(system), GeofenceAsync(system), ActionAsync(system)
+
+        async def listen():
+            async for status in telemetry.subscribe_status_text():
+                heard.append(status.text)
+
+        listener = asyncio.ensure_future(listen())
+        try:
+            home = await first(telemetry.subscribe_home(), lambda h: True, 20, "home")
+            await asyncio.sleep(1)
+            lat, lon = home.latitude_deg, home.longitude_deg
+            square = Polygon([Point(lat - 0.0001, lon - 0.0001), Point(lat + 0.0001, lon - 0.0001),
+                              Point(lat + 0.0001, lon + 0.0001), Point(lat - 0.0001, lon + 0.0001)],
+                             FenceType.INCLUSION)
+            # The example adds Circle(Point(0, 0), 0, INCLUSION), "necessary" for the gRPC bindings; MAVSDK 4.x
+            # refuses it (INVALID_ARGUMENT: a radius of 0), so this flow sends the square alone
+            await bounded(geofence.upload_geofence(GeofenceData([square], [])))
+            # beyond the example: take off and go 40 m east, out of the square (its half-width is 7.5 m east)
+            await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_armable, 20,
+                        "armable")
+            await bounded(action.arm())
+            await bounded(action.takeoff())
+            await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 2.0, 20, "2.5 m")
+            target_lat, target_lon, _ = server.vehicle.frame.to_geodetic(0.0, 40.0, 0.0)
+            await bounded(action.goto_location(target_lat, target_lon, home.absolute_altitude_m + 2.5, 0.0))
+            await first(telemetry.subscribe_status_text(), lambda t: "outside geofence" in t.text, 30 / SPEED,
+                        "the fence's breach")
+            await asyncio.sleep(4.0 / SPEED)
+        finally:
+            listener.cancel()
+    return heard
+
+
+def test_mavsdk_geofence_example_uploads_a_fence_the_vehicle_keeps_to(udp_ports):
+    server, mavsdk_port = vehicle_server(udp_ports, seed=22)
+    with server:
+        heard = asyncio.run(asyncio.wait_for(fly_geofence_example(mavsdk_port, server), 120))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        vehicle = server.vehicle
+    assert [(item.command, item.params[0]) for item in vehicle.missions.fence] == [(5001, 4.0)] * 4
+    assert [(area.inclusion, len(area.vertices)) for area in vehicle.autopilot.fence_areas] == [(True, 4)]
+    assert "Geofence: approaching or outside geofence" in heard
+    assert vehicle.autopilot.mode.name == "HOLD" and 7.0 <= vehicle.state.east_m < 11.0  # held at the fence, not at 40 m

@@ -1,9 +1,10 @@
-"""PX4's mission protocol and Mission mode, over the in-memory link with a pymavlink client in lockstep.
+"""PX4's mission protocol, Mission mode and uploaded fences, over the in-memory link with a pymavlink client in lockstep.
 
 What PX4 does is in sitl_bridge/mission_protocol.py and sitl_bridge/px4_mission.py (docs/sitl.md, "PX4 missions",
 has the source lines): the upload handshake and its retries, the download, clear and set-current, the feasibility
 check (a mission outside the geofence is stored but cannot be started), the climb PX4 inserts before the first
-waypoint, hold times, the landing item, pausing and resuming, and the restart after a finished mission.
+waypoint, hold times, the landing item, pausing and resuming, and the restart after a finished mission; a fence
+uploaded as the FENCE type (sitl_bridge/fences.py): its areas, the breach, and missions checked against it.
 """
 from __future__ import annotations
 
@@ -89,8 +90,12 @@ def test_an_unsupported_item_aborts_the_upload_and_keeps_the_stored_mission(pilo
     speed_in_global_frame = item(pilot, 0, 5, 5, 10, command=mavlink.MAV_CMD_DO_CHANGE_SPEED)
     assert upload(pilot, [speed_in_global_frame])[0] == mavlink.MAV_MISSION_UNSUPPORTED
     assert len(pilot.vehicle.missions.items) == 3  # the square is still the mission
-    assert upload(pilot, [item(pilot, 0, 5, 5, 10)], mission_type=mavlink.MAV_MISSION_TYPE_FENCE)[0] == \
-        mavlink.MAV_MISSION_UNSUPPORTED  # fences are PX4's parameter fences here
+    assert upload(pilot, [item(pilot, 0, 5, 5, 10)], mission_type=mavlink.MAV_MISSION_TYPE_RALLY)[0] == \
+        mavlink.MAV_MISSION_UNSUPPORTED  # rally points are not emulated
+    waypoint_in_a_fence = item(pilot, 0, 5, 5, 10)
+    waypoint_in_a_fence.mission_type = mavlink.MAV_MISSION_TYPE_FENCE
+    assert upload(pilot, [waypoint_in_a_fence], mission_type=mavlink.MAV_MISSION_TYPE_FENCE)[0] == \
+        mavlink.MAV_MISSION_ERROR  # a fence holds fence items only
 
 
 def test_float_items_switch_the_requests_to_float_and_a_client_nack_switches_back(pilot):
@@ -251,3 +256,77 @@ def test_set_current_jumps_and_mission_current_says_so(pilot):
     for _ in range(20):
         pilot.step()
     assert "WPM: WP CURR CMD: Not in list\t" in texts(pilot, start)
+
+
+# ------------------------------------------------------------------ uploaded fences
+FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+
+
+def fence_item(pilot: LockstepPilot, seq: int, command: int, north: float, east: float,
+               param1: float) -> mavlink.MAVLink_message:
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(north, east, 0.0)
+    return mavlink.MAVLink_mission_item_int_message(1, 1, seq, mavlink.MAV_FRAME_GLOBAL_INT, command, int(seq == 0),
+                                                    0, param1, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), 0.0,
+                                                    FENCE)
+
+
+def square_fence(pilot: LockstepPilot, half_m: float = 25.0, no_go: tuple[float, float, float] | None = None) -> list:
+    """An inclusion square of side 2 x half_m around home, and optionally an exclusion circle (north, east, r)."""
+    corners = ((-half_m, -half_m), (half_m, -half_m), (half_m, half_m), (-half_m, half_m))
+    inclusion = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+    items = [fence_item(pilot, seq, inclusion, n, e, 4) for seq, (n, e) in enumerate(corners)]
+    if no_go:
+        items.append(fence_item(pilot, 4, mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, no_go[0], no_go[1], no_go[2]))
+    return items
+
+
+def test_a_fence_upload_is_stored_downloaded_and_its_areas_are_px4s(pilot):
+    ap = pilot.vehicle.autopilot
+    assert upload(pilot, square_fence(pilot, no_go=(10.0, 10.0, 5.0)), mission_type=FENCE)[0] == ACCEPTED
+    assert [a.inclusion for a in ap.fence_areas] == [True, False]
+    assert ap.outside_fence(0.0, 0.0, 0.0) == []
+    assert ap.outside_fence(0.0, 30.0, 0.0) == ["Geofence: approaching or outside geofence"]  # out of the square
+    assert ap.outside_fence(11.0, 12.0, 0.0) == ["Geofence: approaching or outside geofence"]  # in the circle
+    pilot.mav.mission_request_list_send(1, 1, FENCE)
+    assert pilot.wait_message("MISSION_COUNT", match=lambda m: m.mission_type == FENCE).count == 5
+    for seq in range(5):  # PX4 answers the expected seq only
+        pilot.mav.mission_request_int_send(1, 1, seq, FENCE)
+        circle = pilot.wait_message("MISSION_ITEM_INT", match=lambda m, s=seq: m.seq == s)
+    pilot.mav.mission_ack_send(1, 1, ACCEPTED, FENCE)
+    assert (circle.command, circle.param1, circle.mission_type) == (mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 5.0,
+                                                                    FENCE)
+    assert pilot.vehicle.missions.items == []  # the mission is another list
+    pilot.mav.mission_clear_all_send(1, 1, FENCE)
+    assert pilot.wait_message("MISSION_ACK").type == ACCEPTED and ap.fence_areas == ()
+
+
+def test_a_fence_area_without_home_is_dropped_and_a_polygon_needs_three_vertices(pilot):
+    start = len(pilot.received)
+    beside_home = [fence_item(pilot, seq, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, n, e, 3)
+                   for seq, (n, e) in enumerate(((50, 50), (80, 50), (80, 80)))]
+    assert upload(pilot, beside_home, mission_type=FENCE)[0] == ACCEPTED
+    assert "Geofence invalid, doesn't contain Home position\t" in [m.text for m in since(pilot, start, "STATUSTEXT")]
+    assert pilot.vehicle.autopilot.fence_areas == ()  # an inclusion home is outside of would forbid every flight
+    two = [fence_item(pilot, seq, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, n, e, 2)
+           for seq, (n, e) in enumerate(((-10, 0), (10, 0)))]
+    assert upload(pilot, two, mission_type=FENCE)[0] == mavlink.MAV_MISSION_ERROR
+
+
+def test_flying_out_of_an_uploaded_fence_holds_and_a_mission_crossing_it_is_refused(pilot):
+    v = pilot.vehicle
+    assert upload(pilot, square_fence(pilot, half_m=20.0), mission_type=FENCE)[0] == ACCEPTED
+    start = len(pilot.received)
+    assert upload(pilot, [item(pilot, 0, 10, 0, 10), item(pilot, 1, 10, 40, 10)])[0] == ACCEPTED
+    assert "Geofence violation for waypoint 2\t" in texts(pilot, start)
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_DENIED
+    assert upload(pilot, [item(pilot, 0, 10, 0, 10), item(pilot, 1, 10, 15, 10)])[0] == ACCEPTED
+    assert pilot.command(MISSION_START, 0, 0) == mavlink.MAV_RESULT_ACCEPTED  # inside: flown
+    pilot.wait_for(lambda: v.autopilot.mission_finished, 60.0, "the mission inside the fence")
+    start = len(pilot.received)
+    pilot.stream = (0.0, 4.0, 0.0, mavlink.MAV_FRAME_LOCAL_NED)  # then offboard, east, out of the square
+    for _ in range(3):  # a few setpoints first: PX4 enters OFFBOARD only with a live stream
+        pilot.step()
+    assert pilot.set_mode(FlightMode.OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: v.autopilot.mode is FlightMode.HOLD, 30.0, "the fence's Hold")
+    assert "Geofence: approaching or outside geofence" in texts(pilot, start)
+    assert 20.0 <= v.state.east_m < 23.0  # caught at the fence (checked every 200 ms at 4 m/s)
