@@ -3,7 +3,8 @@
 The receive paths:
   * vehicle: ``SimulatedVehicle.receive`` (pymavlink parsing, signing checks, every message handler), with the
     physics stepped every few frames so hostile commands are also flown; once without and once with a signing
-    key (with a key nothing fuzzed may arm it or change its mode: the fuzzer does not have the key);
+    key (with a key nothing fuzzed may arm it or change its mode: the fuzzer does not have the key), and the
+    ArduCopter personality without (its own mission protocol and modes);
   * runner: ``autonomy.vehicle_time.receive_telemetry`` (the companion computer's pymavlink connection, VehicleLink,
     the Kalman filter) plus every reading the runner's state machine takes from the link.
 
@@ -183,11 +184,13 @@ def fuzz_frame(rng: random.Random, frames: list[bytes]) -> tuple[str, bytes]:
 
 # ---------------------------------------------------------------------------------------------- targets
 class VehicleTarget:
-    """The vehicle's receive path on one in-memory link; ``signing_key`` turns signing on."""
+    """The vehicle's receive path on one in-memory link; ``signing_key`` turns signing on; ``autopilot`` picks the
+    personality (its own mission protocol and modes)."""
 
-    def __init__(self, signing_key: bytes | None = None, seed: int = 0):
+    def __init__(self, signing_key: bytes | None = None, seed: int = 0, autopilot: str = "px4"):
         self.vehicle_end, self.client_end = memory_link_pair("fuzz")
-        self.vehicle = SimulatedVehicle(VehicleConfig(seed=seed, signing_key=signing_key), [self.vehicle_end])
+        config = VehicleConfig(seed=seed, signing_key=signing_key, autopilot=autopilot)
+        self.vehicle = SimulatedVehicle(config, [self.vehicle_end])
         self.endpoint = self.vehicle.endpoints[0]
         self.frames_since_step = 0
         self.initial_mode = self.vehicle.autopilot.mode
@@ -294,6 +297,7 @@ class RunnerTarget:
 
 def make_targets(seed: int) -> dict[str, object]:
     return {"vehicle": VehicleTarget(None, seed), "vehicle_signed": VehicleTarget(TARGET_KEY, seed),
+            "vehicle_ardupilot": VehicleTarget(None, seed, autopilot="ardupilot"),
             "runner": RunnerTarget(None), "runner_signed": RunnerTarget(TARGET_KEY)}
 
 
@@ -421,9 +425,9 @@ def print_table(report: dict) -> None:
     columns = ("frames", "crashes", "hangs", "violations", "decoded", "rejected", "max_frame_ms", "frames_per_s")
     print(f"\nMAVLink receive-path fuzzing: {report['frames']:,} frames, seed {report['seed']}, "
           f"{report['wall_s']} s wall, peak RSS {report['peak_rss_mb']} MB")
-    print(f"  {'target':16s}" + "".join(f"{c:>14s}" for c in columns))
+    print(f"  {'target':18s}" + "".join(f"{c:>14s}" for c in columns))
     for name, figures in report["targets"].items():
-        print(f"  {name:16s}" + "".join(f"{figures[c]:>14,}" if isinstance(figures[c], int) else f"{figures[c]:>14}"
+        print(f"  {name:18s}" + "".join(f"{figures[c]:>14,}" if isinstance(figures[c], int) else f"{figures[c]:>14}"
                                         for c in columns))
     print("  mutations: " + ", ".join(f"{kind} {count:,}" for kind, count in report["mutations"].items()))
     for example in report["examples"][:5]:

@@ -14,7 +14,8 @@ ArduPilot's source, read through the search tools (docs/sitl.md, "ArduPilot Copt
   velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it. MAV_CMD_DO_REPOSITION
   (COMMAND_INT only; MAVSDK's goto_location) sets a GUIDED position target, switching to GUIDED with its flag.
 * RTL climbs (RTL_ALT, cone slope), returns, hovers RTL_LOIT_TIME, lands; LAND and RTL disarm once landed, other
-  modes DISARM_DELAY after landing. Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`; the modes' velocity
+  modes DISARM_DELAY after landing. AUTO flies the uploaded mission (:mod:`sitl_bridge.ardupilot_auto`; the
+  protocol: :mod:`sitl_bridge.ardupilot_mission_protocol`). Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`; the modes' velocity
   commands: :mod:`sitl_bridge.ardupilot_guidance`.
 
 ``autopilot.mode`` is a :class:`CopterMode`; ``autopilot.status`` is the personality-neutral view
@@ -27,6 +28,7 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import LocalFrame
+from sitl_bridge.ardupilot_auto import CopterAuto
 from sitl_bridge.ardupilot_failsafes import CopterFailsafes
 from sitl_bridge.ardupilot_guidance import CopterGuidance
 from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
@@ -54,10 +56,11 @@ CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOC
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
 STOP = VelocityCommand()  # zero velocity, heading held
 PHASE_OF_MODE = {CopterMode.GUIDED: "guided", CopterMode.LOITER: "holding", CopterMode.BRAKE: "holding",
-                 CopterMode.RTL: "returning", CopterMode.LAND: "landing", CopterMode.STABILIZE: "manual"}
+                 CopterMode.RTL: "returning", CopterMode.LAND: "landing", CopterMode.STABILIZE: "manual",
+                 CopterMode.AUTO: "mission"}
 
 
-class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, AutopilotBase):
+class ArduCopter(CopterAuto, CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, AutopilotBase):
     """Modes, arming and command handling of one simulated ArduCopter."""
 
     PARAMS_BYTEWISE = False
@@ -84,6 +87,7 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
         self.battery_failsafe = 0  # 0 none, 1 low, 2 critical
         self._battery_low_since_s: dict[int, float] = {}
         self.home_changed = True  # AP_AHRS::set_home at the first position fix sends HOME_POSITION on every link
+        self.auto_reached_news = []
 
     # ----------------------------------------------------------------- what the vehicle reports
     @property
@@ -115,8 +119,11 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
 
     @property
     def is_landing(self) -> bool:
-        """Mode::is_landing: LAND, or RTL in its final descent."""
-        return self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and self.rtl_state == "land")
+        """Mode::is_landing: LAND, RTL in its final descent, or AUTO landing (a LAND command, or its RTL's)."""
+        rtl_landing = self.rtl_state == "land" and (self.mode is CopterMode.RTL or self.auto_submode == "rtl")
+        auto_landing = self.mode is CopterMode.AUTO and (self.auto_submode == "land" and self._land_descending
+                                                        or self.auto_submode == "rtl" and rtl_landing)
+        return self.mode is CopterMode.LAND or (self.mode is CopterMode.RTL and rtl_landing) or auto_landing
 
     def landed_state(self, state: VehicleState) -> int:
         """GCS_MAVLINK_Copter::landed_state(): from the land detector, not the instant of touchdown."""
@@ -171,6 +178,11 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
         if self.armed and mode.requires_gps and not self.gps_ok:  # ignore_checks = !armed
             self._event(now, f"Mode change to {mode.name} failed: requires position", mavlink.MAV_SEVERITY_WARNING)
             return False
+        if mode is CopterMode.AUTO and not self._auto_init(now, state):
+            self._event(now, "Mode change to AUTO failed: init failed", mavlink.MAV_SEVERITY_WARNING)
+            return False
+        if self.mode is CopterMode.AUTO:
+            self._auto_left()
         self.mode, self.state_changed, self.taking_off = mode, True, False  # exit_mode stops a takeoff
         here = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
         if mode in (CopterMode.GUIDED, CopterMode.LOITER):
@@ -182,6 +194,8 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
             self._rtl_start(state)
         self._fence_recovery_start(now)
         self._event(now, f"mode {mode.name} ({reason})", broadcast=False)
+        if mode is CopterMode.AUTO:
+            self._auto_entered(now, state)
         return True
 
     def _rtl_start(self, state: VehicleState) -> None:
@@ -204,7 +218,8 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
             if failure:
                 self._event(now, f"PreArm: {failure}", mavlink.MAV_SEVERITY_CRITICAL)
                 return FAILED
-            if not self.mode.allows_arming:
+            auto_armable = self.mode is CopterMode.AUTO and int(self.params["AUTO_OPTIONS"]) & 1  # AllowArming
+            if not (self.mode.allows_arming or auto_armable):  # 4.5's text; master names the mode
                 self._event(now, "Arm: Mode not armable", mavlink.MAV_SEVERITY_CRITICAL)
                 return FAILED
         self.armed, self.state_changed, self._landed_armed_since_s = True, True, now
@@ -212,6 +227,8 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
         if state.on_ground:  # AP_Arming_Copter::arm: home is set where the vehicle arms (AP_AHRS::set_home sends it)
             self.home_ned, self.home_changed = (state.north_m, state.east_m, 0.0), True
         self._event(now, "Arming motors")
+        if self.mode is CopterMode.AUTO and self.mission_state != "running":
+            self._auto_entered(now, state)
         return ACCEPTED
 
     def disarm(self, now: float, force: bool, reason: str) -> int:
@@ -225,6 +242,7 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
 
     def _disarm(self, now: float, reason: str) -> None:
         self.armed, self.state_changed, self.taking_off = False, True, False
+        self._auto_disarmed()
         self._event(now, "Disarming motors")
         self._event(now, f"disarmed ({reason})", broadcast=False)
 
@@ -252,6 +270,8 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
             return ACCEPTED if self.set_mode(as_int(p[1], 0) & 0xFF, now, state, "DO_SET_MODE") else FAILED
         if command == mavlink.MAV_CMD_SET_CAMERA_ZOOM:
             return self._zoom(as_int(p[0]), p[1], now)
+        if command == mavlink.MAV_CMD_MISSION_START:
+            return self._mission_start(p, now, state)
         if command == mavlink.MAV_CMD_DO_REPOSITION and frame is not None:
             return self._reposition(p, frame, now, state)
         return UNSUPPORTED
@@ -309,6 +329,11 @@ class ArduCopter(CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, Au
             self._check_battery(now, state)
         if not self.armed:
             return HOVER
+        if self.mode is CopterMode.AUTO:
+            command = self._auto_command(now, state)
+            if self.armed:
+                self._auto_disarm(now)  # DISARM_DELAY while the takeoff waits on the ground
+            return command if self.armed else HOVER
         self._auto_disarm(now)
         if not self.armed or self.mode is CopterMode.STABILIZE:
             return HOVER

@@ -22,7 +22,8 @@ class CopterGuidance:
 
     def _takeoff_command(self, state: VehicleState) -> VelocityCommand:
         north, east, down = self.hold_target
-        climb = self.params["WPNAV_SPEED_UP" if self.mode is CopterMode.GUIDED else "PILOT_SPEED_UP"] / 100.0
+        climb = self.params["WPNAV_SPEED_UP" if self.mode in (CopterMode.GUIDED, CopterMode.AUTO)
+                            else "PILOT_SPEED_UP"] / 100.0
         if abs(state.down_m - down) < ARRIVED_RADIUS_M:
             self.taking_off = False  # complete; GUIDED and LOITER hold the takeoff point
         return velocity_toward(state, north, east, down, self.airframe,

@@ -19,6 +19,7 @@ class CopterMode(enum.IntEnum):
     """The emulated ArduCopter modes, valued by their ``Mode::Number``."""
 
     STABILIZE = 0
+    AUTO = 3
     GUIDED = 4
     LOITER = 5
     RTL = 6
@@ -28,17 +29,18 @@ class CopterMode(enum.IntEnum):
     @property
     def requires_gps(self) -> bool:
         """Entering it when armed needs a position estimate ("Mode change to X failed: requires position")."""
-        return self in (CopterMode.GUIDED, CopterMode.LOITER, CopterMode.RTL, CopterMode.BRAKE)
+        return self in (CopterMode.GUIDED, CopterMode.LOITER, CopterMode.RTL, CopterMode.BRAKE, CopterMode.AUTO)
 
     @property
     def allows_arming(self) -> bool:
-        """Arming in this mode is allowed from a ground station (else "Arm: Mode not armable")."""
+        """Arming in this mode is allowed from a ground station (else "Arm: Mode not armable"; AUTO: only
+        with AUTO_OPTIONS bit 0, which the autopilot checks)."""
         return self in (CopterMode.STABILIZE, CopterMode.GUIDED, CopterMode.LOITER)
 
     @property
     def is_autopilot(self) -> bool:
         """An autopilot mode (not pilot controlled): FS_OPTIONS bit 4 keeps pilot modes going on GCS failsafe."""
-        return self in (CopterMode.GUIDED, CopterMode.RTL, CopterMode.LAND)
+        return self in (CopterMode.GUIDED, CopterMode.RTL, CopterMode.LAND, CopterMode.AUTO)
 
     @property
     def has_user_takeoff(self) -> bool:
@@ -53,7 +55,7 @@ class CopterMode(enum.IntEnum):
 
 # ArduCopter mode numbers that exist but are not emulated (a DO_SET_MODE to one of these FAILS here, where real
 # ArduPilot would switch); any other number is "No such mode".
-OTHER_COPTER_MODES = {1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 7: "CIRCLE", 11: "DRIFT", 13: "SPORT", 14: "FLIP",
+OTHER_COPTER_MODES = {1: "ACRO", 2: "ALT_HOLD", 7: "CIRCLE", 11: "DRIFT", 13: "SPORT", 14: "FLIP",
                       15: "AUTOTUNE", 16: "POSHOLD", 18: "THROW", 19: "AVOID_ADSB", 20: "GUIDED_NOGPS",
                       21: "SMART_RTL", 22: "FLOWHOLD", 23: "FOLLOW", 24: "ZIGZAG", 25: "SYSTEMID", 26: "AUTOROTATE",
                       27: "AUTO_RTL", 28: "TURTLE"}

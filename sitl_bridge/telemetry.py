@@ -44,6 +44,8 @@ class TelemetrySource(Protocol):
     ground_velocity: tuple[float, float, float]
     yaw_rate_rad_s: float
     power_w: float
+    is_ardupilot: bool
+    mission_reports: MissionReports  # PX4's MISSION_CURRENT pacing and state
 
     @property
     def time_boot_ms(self) -> int: ...
@@ -80,6 +82,44 @@ class TelemetrySchedule:
                 deadline += interval
                 self.next_due_s[msg_id] = deadline if deadline > now else now + interval
         return due
+
+
+class MissionReports:
+    """MISSION_CURRENT and MISSION_ITEM_REACHED as mavlink_mission.cpp's send() paces them: MISSION_CURRENT at once
+    when the current item changes and at 1 Hz, MISSION_ITEM_REACHED for each item reached and the last one again at 1 Hz,
+    ten more times. PX4 also sends MISSION_CURRENT (total 65535) without a mission; this simulator stays silent
+    then, so that flights without a mission send exactly what they sent before missions were emulated."""
+
+    REPEATS = 10
+
+    def __init__(self) -> None:
+        self.mission_state = mavlink.MISSION_STATE_UNKNOWN
+        self._current: int | None = None
+        self._current_s = -math.inf
+        self._reached = -1  # the last one sent, repeated at 1 Hz
+        self._reached_s = -math.inf
+        self._repeats_left = 0
+
+    def due(self, now: float, current: int, total: int, reached: list[int],
+            state_of: Callable[[int], tuple[int, int]]) -> list[mavlink.MAVLink_message]:
+        """The messages to send this tick; ``reached``: the items reached since the last call (emptied here),
+        ``state_of(previous)`` gives (mission_state, mission_mode)."""
+        news, reached[:] = list(reached), []
+        if total == 0:
+            self._current, self._repeats_left = None, 0
+            return []
+        self.mission_state, mode = state_of(self.mission_state)
+        out = []
+        if current != self._current or now - self._current_s >= 1.0:
+            out.append(mavlink.MAVLink_mission_current_message(current, total, self.mission_state, mode))
+            self._current, self._current_s = current, now
+        for seq in news:
+            out.append(mavlink.MAVLink_mission_item_reached_message(seq))
+            self._reached, self._reached_s, self._repeats_left = seq, now, self.REPEATS
+        if not news and self._repeats_left and now - self._reached_s >= 1.0:
+            out.append(mavlink.MAVLink_mission_item_reached_message(self._reached))
+            self._reached_s, self._repeats_left = now, self._repeats_left - 1
+        return out
 
 
 def _deg_e7(value_deg: float) -> int:
@@ -209,6 +249,18 @@ def known_home_position(v: TelemetrySource) -> mavlink.MAVLink_message | None:
     return home_position(v) if v.autopilot.gps_ok else None
 
 
+def mission_current(v: TelemetrySource, seq: int | None = None) -> mavlink.MAVLink_message:
+    """MISSION_CURRENT: ArduPilot's (GCS_MAVLINK::send_mission_current: the current navigation command, home
+    excluded from the total; ``seq`` as MISSION_SET_CURRENT asked) or PX4's (mavlink_mission.cpp: total 65535
+    without a mission)."""
+    ap = v.autopilot
+    if v.is_ardupilot:
+        current, total, state, mode = ap.mission_current_fields()
+        return mavlink.MAVLink_mission_current_message(current if seq is None else seq, total, state, mode)
+    state, mode = ap.mission_state(v.mission_reports.mission_state)
+    return mavlink.MAVLink_mission_current_message(ap.mission_current, len(ap.mission_items) or 0xFFFF, state, mode)
+
+
 def autopilot_version(v: TelemetrySource) -> mavlink.MAVLink_message:
     ap = v.autopilot
     return mavlink.MAVLink_autopilot_version_message(
@@ -228,4 +280,5 @@ BUILDERS: dict[int, Callable[[TelemetrySource], mavlink.MAVLink_message | None]]
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: known_home_position,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
 }

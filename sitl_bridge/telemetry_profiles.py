@@ -37,6 +37,7 @@ GPS_RAW_INT = mavlink.MAVLINK_MSG_ID_GPS_RAW_INT
 VFR_HUD = mavlink.MAVLINK_MSG_ID_VFR_HUD
 HOME_POSITION = mavlink.MAVLINK_MSG_ID_HOME_POSITION
 BATTERY_STATUS = mavlink.MAVLINK_MSG_ID_BATTERY_STATUS
+MISSION_CURRENT = mavlink.MAVLINK_MSG_ID_MISSION_CURRENT
 
 PROFILES = ("default", "legacy", "px4", "px4_sitl", "ardupilot")
 
@@ -57,7 +58,7 @@ PX4_SITL_GCS_RATES_HZ: dict[int, float] = {**PX4_NORMAL_RATES_HZ, LOCAL_POSITION
 
 # ArduPilot's stream groups (GCS_MAVLink_Parameters.cpp, STREAM_*_msgs), restricted to the messages we build.
 ARDUPILOT_STREAM_MESSAGES: dict[str, tuple[int, ...]] = {
-    "EXT_STAT": (SYS_STATUS, GPS_RAW_INT), "POSITION": (GLOBAL_POSITION_INT, LOCAL_POSITION_NED),
+    "EXT_STAT": (SYS_STATUS, GPS_RAW_INT, MISSION_CURRENT), "POSITION": (GLOBAL_POSITION_INT, LOCAL_POSITION_NED),
     "EXTRA1": (ATTITUDE,), "EXTRA2": (VFR_HUD,), "EXTRA3": (BATTERY_STATUS,),
 }
 DATA_STREAM_GROUPS: dict[int, str] = {  # REQUEST_DATA_STREAM.req_stream_id -> group

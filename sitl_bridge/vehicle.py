@@ -22,12 +22,13 @@ from missions.geodesy import GeoPoint, LocalFrame
 from missions.signing import LinkSigning, simulated_timestamp
 from sitl_bridge import dynamics, telemetry
 from sitl_bridge.ardupilot import ArduCopter
+from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
 from sitl_bridge.ardupilot_params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
 from sitl_bridge.autopilot import Autopilot
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
 from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.link import Link
-from sitl_bridge.mission_protocol import MissionReports, MissionTransfer
+from sitl_bridge.mission_protocol import MissionTransfer
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.sensors import SensorSuite
 from sitl_bridge.signing import vehicle_signing
@@ -96,7 +97,15 @@ class SimulatedVehicle(MessageHandlers):
             current_seq=lambda: self.autopilot.mission_current,
             set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
             text=lambda text, severity: self.autopilot._event(self.time_s, text, severity))
-        self.mission_reports = MissionReports()
+        self.mission_reports = telemetry.MissionReports()
+        self.copter_missions: CopterMissionTransfer | None = CopterMissionTransfer(
+            home=lambda: (self.home.lat_deg, self.home.lon_deg, self.home.alt_m) if self.autopilot.gps_ok else None,
+            running=lambda: self.autopilot.mission_running,
+            on_mission=lambda items: self.autopilot.load_auto_mission(items, self.time_s, self.state),
+            set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
+            send_current=lambda seq: self.broadcast(telemetry.mission_current(self, seq)),
+            text=lambda text, severity: self.autopilot._event(self.time_s, text, severity),
+        ) if self.is_ardupilot else None
         self._handlers = self.handlers()
         self._boot_tick = -int(round(config.boot_time_s * config.physics_rate_hz))  # the tick the autopilot booted
         self._reboot_tick = None if config.reboot_at_s is None else int(round(config.reboot_at_s / self.dt_s))
@@ -215,10 +224,19 @@ class SimulatedVehicle(MessageHandlers):
                     endpoint.send(built[msg_id])
 
     def _send_mission_status(self) -> None:
-        """The mission protocol's retries, and MISSION_CURRENT / MISSION_ITEM_REACHED (PX4 personality)."""
+        """The mission protocol's retries, and MISSION_CURRENT / MISSION_ITEM_REACHED: PX4's paced as its mission
+        manager does; ArduPilot's MISSION_ITEM_REACHED at once on every link (its MISSION_CURRENT streams with
+        EXT_STAT)."""
+        now, ap = self.time_s, self.autopilot
+        if self.copter_missions is not None:
+            self.copter_missions.tick(now)
+            for seq in ap.auto_reached_news:
+                self.broadcast(mavlink.MAVLink_mission_item_reached_message(seq))
+            ap.auto_reached_news.clear()
+            if ap.events:
+                self._flush_events()
         if self.missions is None:
             return
-        now, ap = self.time_s, self.autopilot
         self.missions.tick(now)
         for msg in self.mission_reports.due(now, ap.mission_current, len(ap.mission_items), ap.mission_reached_news,
                                             ap.mission_state):
@@ -267,7 +285,7 @@ class SimulatedVehicle(MessageHandlers):
         current = getattr(self.autopilot, "mission_current", 0)
         self.autopilot = make_autopilot(self.config, self.params, self.frame)
         self.autopilot.gps_ok = self.sensors.gps is not None
-        self.mission_reports = MissionReports()
+        self.mission_reports = telemetry.MissionReports()
         self.endpoints = self._make_endpoints()
         if self.signing is not None:
             for link_id, endpoint in enumerate(self.endpoints):
@@ -275,6 +293,9 @@ class SimulatedVehicle(MessageHandlers):
         self.origin_ned = here
         self._set_home(here)
         self.autopilot.home_changed = False  # just announced
+        if self.copter_missions is not None:  # ArduPilot keeps its mission in storage too
+            self.copter_missions.upload = None
+            self.autopilot.load_auto_mission(self.copter_missions.items, self.time_s, state)
         if self.missions is not None:  # a transfer does not survive the reboot; the stored mission and fence do
             self.missions.transfer = None
             self.autopilot.load_fence(self.missions.fence, self.time_s, state)

@@ -6,6 +6,7 @@ the rest by the autopilot personality. Parameters travel PX4's way (integers byt
 """
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -13,6 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_bridge import telemetry
 from missions.signing import LinkSigning
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
+from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
 from sitl_bridge.mission_protocol import MissionTransfer
 from sitl_bridge.multirotor import VehicleState
@@ -41,6 +43,7 @@ class MessageHandlers:
     endpoints: list[Endpoint]
     signing: LinkSigning | None
     missions: MissionTransfer | None
+    copter_missions: CopterMissionTransfer | None
     setup_signing_refused: int
     is_ardupilot: bool
     dt_s: float
@@ -61,13 +64,19 @@ class MessageHandlers:
             "PARAM_SET": self._on_param_set,
             "TIMESYNC": self._on_timesync,
             "SET_MODE": self._on_set_mode,
-            "MISSION_REQUEST_LIST": self._on_mission_request_list,
             "HEARTBEAT": self._on_heartbeat,
             "SETUP_SIGNING": self._on_setup_signing,
         }
         if self.is_ardupilot:  # PX4 implements neither REQUEST_DATA_STREAM nor guided-mode mission items
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
             table["MISSION_ITEM_INT"] = table["MISSION_ITEM"] = self._on_mission_item
+        if self.copter_missions is not None:  # ArduPilot's mission protocol (sitl_bridge.ardupilot_mission_protocol)
+            c = self.copter_missions
+            for name, method in (("MISSION_COUNT", c.on_count), ("MISSION_REQUEST_INT", c.on_request),
+                                 ("MISSION_REQUEST", c.on_request), ("MISSION_ACK", c.on_ack),
+                                 ("MISSION_REQUEST_LIST", c.on_request_list), ("MISSION_CLEAR_ALL", c.on_clear_all),
+                                 ("MISSION_SET_CURRENT", c.on_set_current)):
+                table[name] = self._mission_handler(method, (AUTOPILOT_COMPONENT,))
         elif self.missions is not None:  # PX4: the mission protocol (sitl_bridge.mission_protocol)
             m = self.missions
             for name, method in (("MISSION_COUNT", m.on_count), ("MISSION_ITEM_INT", m.on_item),
@@ -78,9 +87,9 @@ class MessageHandlers:
                 table[name] = self._mission_handler(method)
         return table
 
-    def _mission_handler(self, method: Callable) -> Callable:
+    def _mission_handler(self, method: Callable, components: tuple[int, ...] = MISSION_COMPONENTS) -> Callable:
         def handle(endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-            if self._for_us(msg, MISSION_COMPONENTS):
+            if self._for_us(msg, components):
                 method(endpoint, msg, self.time_s)
         return handle
 
@@ -223,17 +232,16 @@ class MessageHandlers:
             # GCS_Common.cpp handle_timesync fill tc1 and ts1 only); checked 2026-12-07.
             endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_since_boot_s * 1e9), msg.ts1))
 
-    def _on_mission_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        if self._for_us(msg):  # no missions are stored; saying so stops ground stations waiting
-            endpoint.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                                msg.mission_type))
-
     def _on_mission_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        """ArduPilot's guided-mode waypoints (MISSION_ITEM(_INT) with current 2 or 3), answered with MISSION_ACK."""
+        """ArduPilot: an item of a mission upload, or a guided-mode waypoint (current 2 or 3), answered with
+        MISSION_ACK."""
         if not self._for_us(msg):
             return
+        if self.copter_missions is not None and self.copter_missions.on_item(endpoint, msg, self.time_s):
+            return
         if msg.get_type() == "MISSION_ITEM":  # floats in degrees: ArduPilot converts them to the _INT form
-            lat_int, lon_int = int(round(msg.x * 1e7)), int(round(msg.y * 1e7))
+            # (a NaN or infinite one fails check_lat / check_lng: out of range here too)
+            lat_int, lon_int = (int(round(v * 1e7)) if math.isfinite(v) else 2**31 for v in (msg.x, msg.y))
         else:
             lat_int, lon_int = msg.x, msg.y
         result = self.autopilot.handle_mission_item(msg.current, msg.command, msg.frame, lat_int, lon_int, msg.z,

@@ -80,10 +80,10 @@ def test_signed_vehicle_never_arms_or_changes_mode_from_garbage(chunks):
 
 
 @FUZZ
-@given(seed=st.integers(0, 2**32 - 1))
-def test_vehicle_flies_hostile_commands_and_keeps_a_finite_state(seed):
+@given(seed=st.integers(0, 2**32 - 1), autopilot=st.sampled_from(["px4", "ardupilot"]))
+def test_vehicle_flies_hostile_commands_and_keeps_a_finite_state(seed, autopilot):
     rng = random.Random(seed)
-    target = fuzz.VehicleTarget(None)
+    target = fuzz.VehicleTarget(None, autopilot=autopilot)
     target.vehicle.run(1.0)
     for _ in range(40):
         target.feed(fuzz.hostile_frame(rng))

@@ -189,6 +189,45 @@ def test_mavproxy_loads_lists_and_flies_a_px4_mission(udp_ports, tmp_path):
         return_home(mavproxy, vehicle, "long NAV_RETURN_TO_LAUNCH", "NAV_RETURN_TO_LAUNCH: ACCEPTED")
 
 
+def test_mavproxy_loads_an_ardupilot_mission_and_mission_start_flies_it(udp_ports, tmp_path):
+    """ArduPilot SITL's usual flow with a mission file: ``wp load`` (a QGC WPL 110 file whose row 0 is home), GUIDED,
+    arm, then MISSION_START, which switches to AUTO and lets the takeoff go (there is no throttle stick here). The
+    vehicle takes off, flies the two waypoints and returns; MAVProxy prints each reached command."""
+    tcp_port, api_port, api_remote, _ = udp_ports
+    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)
+    with VehicleServer(VehicleConfig(autopilot="ardupilot", seed=3), ports, speed=1.5 * SPEED) as server:
+        vehicle, home = server.vehicle, server.vehicle.home
+        rows = [f"0\t1\t0\t16\t0\t0\t0\t0\t{home.lat_deg:.8f}\t{home.lon_deg:.8f}\t{home.alt_m:.2f}\t1",
+                "1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t12\t1"]
+        for seq, (north, east) in enumerate(((30.0, 0.0), (30.0, 30.0)), start=2):
+            lat, lon, _ = vehicle.frame.to_geodetic(north, east, 0.0)
+            rows.append(f"{seq}\t0\t3\t16\t0\t0\t0\t0\t{lat:.8f}\t{lon:.8f}\t12\t1")
+        rows.append("4\t0\t3\t20\t0\t0\t0\t0\t0\t0\t0\t1")
+        (tmp_path / "survey.txt").write_text("QGC WPL 110\n" + "\n".join(rows) + "\n")
+        mavproxy = MavProxy(f"tcp:127.0.0.1:{tcp_port}", tmp_path)
+        try:
+            mavproxy.expect("Detected vehicle 1:1")
+            mavproxy.send(f"wp load {tmp_path / 'survey.txt'}")
+            mavproxy.expect("Loaded 5 waypoints")
+            wait_until(lambda: len(vehicle.copter_missions.items) == 4, 15, "the upload")
+            assert [item.command for item in vehicle.copter_missions.items] == [22, 16, 16, 20]
+            mavproxy.send("mode GUIDED")
+            mavproxy.expect("DO_SET_MODE: ACCEPTED")
+            mavproxy.send("arm throttle")
+            mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+            mavproxy.send("long MISSION_START 0 0")
+            mavproxy.expect("MISSION_START: ACCEPTED")
+            mavproxy.expect("Mission: 1 Takeoff")
+            assert vehicle.autopilot.mode is CopterMode.AUTO
+            mavproxy.expect("Reached command #3", 60)
+            mavproxy.expect("Mission: 4 RTL")
+            wait_until(lambda: not vehicle.autopilot.armed, 90, "the return, landing and disarm")
+            assert vehicle.state.on_ground and math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.5
+        finally:
+            mavproxy.close()
+        assert server.error is None and vehicle.handler_errors == 0
+
+
 def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tmp_path):
     tcp_port, api_port, api_remote, _ = udp_ports
     ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)

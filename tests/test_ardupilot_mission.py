@@ -1,0 +1,175 @@
+"""ArduCopter's mission protocol and AUTO mode, over the in-memory link with a pymavlink client in lockstep.
+
+What ArduPilot does is in sitl_bridge/ardupilot_mission_protocol.py and sitl_bridge/ardupilot_auto.py (docs/sitl.md,
+"ArduPilot missions"): item 0 is home, uploads are answered with MISSION_REQUEST, a second a request, 8 s to give
+up; AUTO is not armable, needs a takeoff first when armed on the ground, takes off on MISSION_START, announces each
+command, holds at the end in the air, and disarms after a LAND.
+"""
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from test_ardupilot_vehicle import ACCEPTED, ARM, FAILED, airborne, copter, texts
+from test_px4_mission import upload  # the same client side: answer each request until the MISSION_ACK
+
+from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.scripted_flight import LockstepPilot
+
+RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+MISSION_START = mavlink.MAV_CMD_MISSION_START
+WAYPOINT, TAKEOFF, LAND, RTL = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
+                                mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+
+
+def item(pilot: LockstepPilot, seq: int, command: int, north: float = 0.0, east: float = 0.0, alt: float = 0.0,
+         p1: float = 0.0, p2: float = 0.0, frame: int = RELATIVE) -> mavlink.MAVLink_message:
+    if command in (mavlink.MAV_CMD_DO_CHANGE_SPEED, RTL):
+        return mavlink.MAVLink_mission_item_int_message(1, 1, seq, mavlink.MAV_FRAME_MISSION, command, 0, 1, p1, p2,
+                                                        -1 if p2 else 0, 0, 0, 0, 0)
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(north, east, 0.0)
+    return mavlink.MAVLink_mission_item_int_message(1, 1, seq, frame, command, 0, 1, p1, p2, 0, 0,
+                                                    round(lat * 1e7), round(lon * 1e7), alt)
+
+
+def home_item(pilot: LockstepPilot) -> mavlink.MAVLink_message:
+    return item(pilot, 0, WAYPOINT, frame=mavlink.MAV_FRAME_GLOBAL)
+
+
+def survey(pilot: LockstepPilot) -> list:
+    """Home's place, takeoff to 12 m, 30 m north, 8 m/s, 30 m east with a 3 s wait, return to launch."""
+    return [home_item(pilot), item(pilot, 1, TAKEOFF, alt=12.0), item(pilot, 2, WAYPOINT, 30.0, 0.0, 12.0),
+            item(pilot, 3, mavlink.MAV_CMD_DO_CHANGE_SPEED, p1=1, p2=8.0),
+            item(pilot, 4, WAYPOINT, 30.0, 30.0, 12.0, p1=3.0), item(pilot, 5, RTL)]
+
+
+def test_upload_is_requested_with_mission_request_and_home_is_item_0_of_the_download():
+    pilot = copter()
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 3.0, "GPS")
+    start = len(pilot.received)
+    result, requests = upload(pilot, survey(pilot))
+    assert result == mavlink.MAV_MISSION_ACCEPTED
+    assert [(r.get_type(), r.seq) for r in requests] == [("MISSION_REQUEST", seq) for seq in range(6)]
+    assert "Flight plan received" in texts(pilot, start)
+    assert [i.command for i in pilot.vehicle.copter_missions.items] == [TAKEOFF, WAYPOINT, 178, WAYPOINT, RTL]
+    pilot.mav.mission_request_list_send(1, 1, 0)
+    assert pilot.wait_message("MISSION_COUNT").count == 6  # home included
+    got = []
+    for seq in (0, 4):
+        pilot.mav.mission_request_int_send(1, 1, seq, 0)
+        got.append(pilot.wait_message("MISSION_ITEM_INT", match=lambda m, s=seq: m.seq == s))
+    home = pilot.vehicle.home
+    assert (got[0].frame, got[0].x, got[0].y) == (mavlink.MAV_FRAME_GLOBAL, round(home.lat_deg * 1e7),
+                                                  round(home.lon_deg * 1e7))
+    assert abs(got[0].z - home.alt_m) < 0.01  # home's altitude above mean sea level
+    assert (got[1].frame, got[1].param1, got[1].z) == (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 3.0, 12.0)
+
+
+def test_an_unanswered_upload_is_asked_again_every_second_and_cancelled_after_8_s():
+    pilot = copter()
+    start = len(pilot.received)
+    pilot.mav.mission_count_send(1, 1, 3, 0)
+    for _ in range(int(10.0 / pilot.vehicle.dt_s)):
+        pilot.step()
+    requests = [m for m in pilot.received[start:] if m.get_type() == "MISSION_REQUEST"]
+    assert all(r.seq == 0 for r in requests) and 8 <= len(requests) <= 10
+    assert "Mission upload timeout" in texts(pilot, start)
+    ack = next(m for m in pilot.received[start:] if m.get_type() == "MISSION_ACK")
+    assert ack.type == mavlink.MAV_MISSION_OPERATION_CANCELLED
+
+
+def test_a_wrong_seq_is_refused_and_the_upload_goes_on():
+    pilot = copter()
+    pilot.mav.mission_count_send(1, 1, 2, 0)
+    assert pilot.wait_message("MISSION_REQUEST").seq == 0
+    pilot.mav.send(item(pilot, 1, WAYPOINT, 10, 0, 10))
+    assert pilot.wait_message("MISSION_ACK").type == mavlink.MAV_MISSION_INVALID_SEQUENCE
+    pilot.mav.send(home_item(pilot))
+    pilot.mav.send(item(pilot, 1, WAYPOINT, 10, 0, 10))
+    assert pilot.wait_message("MISSION_ACK", match=lambda m: m.type == mavlink.MAV_MISSION_ACCEPTED)
+    assert len(pilot.vehicle.copter_missions.items) == 1
+
+
+def test_auto_is_not_armable_needs_a_takeoff_and_mission_start_flies_the_mission():
+    pilot = copter()
+    v = pilot.vehicle
+    pilot.wait_for(lambda: v.autopilot.gps_ok, 3.0, "GPS")
+    assert upload(pilot, survey(pilot))[0] == mavlink.MAV_MISSION_ACCEPTED
+    assert pilot.set_mode(CopterMode.AUTO) == ACCEPTED  # disarmed: any mode
+    start = len(pilot.received)
+    assert pilot.command(ARM, 1) == FAILED and "Arm: Mode not armable" in texts(pilot, start)
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == ACCEPTED
+    pilot.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_EXTENDED_STATUS, 2, 1)  # as MAVProxy asks
+    start = len(pilot.received)
+    assert pilot.command(MISSION_START, 0, 0) == ACCEPTED  # AUTO, and the takeoff may go
+    pilot.wait_for(lambda: v.autopilot.mission_state == "complete" or not v.autopilot.armed, 120.0, "the mission")
+    pilot.wait_for(lambda: not v.autopilot.armed, 30.0, "disarmed at home")
+    for _ in range(int(1.5 / v.dt_s)):  # the next MISSION_CURRENTs (EXT_STAT at 2 Hz)
+        pilot.step()
+    said = texts(pilot, start)
+    assert said[:3] == ["Mission: 1 Takeoff", "Mission: 2 WP", "Mission: 3 ChangeSpeed"]
+    assert "Reached command #2" in said and "Reached command #4" in said and "Mission: 5 RTL" in said
+    reached = [m.seq for m in pilot.received[start:] if m.get_type() == "MISSION_ITEM_REACHED"]
+    assert reached == [1, 3, 2, 4, 5]  # a DO command completes as its navigation command starts
+    current = [m for m in pilot.received[start:] if m.get_type() == "MISSION_CURRENT"]
+    assert {m.seq for m in current} >= {1, 2, 4, 5} and {m.total for m in current} == {5}
+    assert current[0].mission_mode == 1 and current[-1].mission_state == mavlink.MISSION_STATE_COMPLETE
+    assert math.hypot(v.state.north_m, v.state.east_m) < 1.5 and v.autopilot.mode is CopterMode.AUTO
+
+
+def test_armed_on_the_ground_auto_refuses_a_mission_without_a_takeoff():
+    pilot = copter()
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 3.0, "GPS")
+    assert upload(pilot, [home_item(pilot), item(pilot, 1, WAYPOINT, 20, 0, 10)])[0] == mavlink.MAV_MISSION_ACCEPTED
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == ACCEPTED
+    start = len(pilot.received)
+    assert pilot.set_mode(CopterMode.AUTO) == FAILED
+    assert texts(pilot, start) == ["Auto: Missing Takeoff Cmd", "Mode change to AUTO failed: init failed"]
+
+
+def test_a_land_command_lands_there_disarms_and_the_mission_stays_on_it():
+    pilot = airborne(alt_m=10.0)
+    v = pilot.vehicle
+    items = [home_item(pilot), item(pilot, 1, WAYPOINT, 20, 0, 10), item(pilot, 2, LAND, 20, 20, 0)]
+    assert upload(pilot, items)[0] == mavlink.MAV_MISSION_ACCEPTED
+    start = len(pilot.received)
+    assert pilot.set_mode(CopterMode.AUTO) == ACCEPTED  # in the air: no takeoff needed
+    pilot.wait_for(lambda: not v.autopilot.armed, 90.0, "landed and disarmed")
+    assert math.hypot(v.state.north_m - 20.0, v.state.east_m - 20.0) < 2.5
+    assert v.autopilot.nav_index is None  # disarming reset the mission's commands
+    reached = [m.seq for m in pilot.received[start:] if m.get_type() == "MISSION_ITEM_REACHED"]
+    assert reached == [1]  # no REACHED for the LAND command: it disarms instead
+    assert "Mission: 2 Land" in texts(pilot, start)
+
+
+def test_the_end_of_the_mission_in_the_air_holds_in_auto_and_clear_all_is_refused_while_it_runs():
+    pilot = airborne(alt_m=10.0)
+    v = pilot.vehicle
+    assert upload(pilot, [home_item(pilot), item(pilot, 1, WAYPOINT, 25, 0, 10)])[0] == mavlink.MAV_MISSION_ACCEPTED
+    assert pilot.set_mode(CopterMode.AUTO) == ACCEPTED
+    pilot.mav.mission_clear_all_send(1, 1, 0)
+    assert pilot.wait_message("MISSION_ACK").type == mavlink.MAV_MISSION_ERROR  # armed and running
+    pilot.wait_for(lambda: v.autopilot.mission_state == "complete", 40.0, "the waypoint")
+    fly_s = 5.0
+    for _ in range(int(fly_s / v.dt_s)):
+        pilot.step()
+    assert v.autopilot.armed and v.autopilot.mode is CopterMode.AUTO
+    assert math.hypot(v.state.north_m - 25.0, v.state.east_m) < 2.5 and abs(v.state.vn_mps) < 0.3
+
+
+def test_leaving_auto_and_coming_back_flies_the_current_command_again():
+    pilot = airborne(alt_m=10.0)
+    v = pilot.vehicle
+    items = [home_item(pilot), item(pilot, 1, WAYPOINT, 10, 0, 10), item(pilot, 2, WAYPOINT, 60, 0, 10)]
+    assert upload(pilot, items)[0] == mavlink.MAV_MISSION_ACCEPTED
+    assert pilot.set_mode(CopterMode.AUTO) == ACCEPTED
+    pilot.wait_for(lambda: v.autopilot.nav_index == 2 and v.state.north_m > 25.0, 40.0, "on the way to 2")
+    assert pilot.set_mode(CopterMode.LOITER) == ACCEPTED
+    assert v.autopilot.mission_state == "stopped"
+    pilot.mav.mission_set_current_send(1, 1, 1)  # not running: the next start goes from command 1
+    assert pilot.wait_message("MISSION_CURRENT", match=lambda m: m.seq == 1)
+    assert pilot.set_mode(CopterMode.AUTO) == ACCEPTED
+    assert v.autopilot.nav_index == 1
+    pilot.wait_for(lambda: v.autopilot.mission_state == "complete", 60.0, "the mission again")
+    assert math.hypot(v.state.north_m - 60.0, v.state.east_m) < 2.5
