@@ -48,9 +48,10 @@ LAND_WITH_PAUSE_S = 4.0  # a failsafe LAND waits this long before descending (se
 RTL_ALT_MIN_M = 2.0
 RTL_MIN_CONE_SLOPE = 0.5
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | 255  # reported as ArduCopter V4.5.7, official release
-# What we implement of what ArduCopter claims (it also claims missions, FTP, attitude targets...).
-# No PARAM_ENCODE_BYTEWISE: ArduPilot parameters are floats.
+# What we implement of what ArduCopter claims (it also claims FTP, attitude targets...).
+# No PARAM_ENCODE_BYTEWISE: ArduPilot parameters are floats. MISSION_INT: MAVSDK transfers missions only with it.
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)

@@ -103,7 +103,8 @@ class FlightStatus:
     """One of ``on_ground`` (disarmed, or armed and landed), ``taking_off``, ``guided`` (flying the
     companion computer's setpoints: PX4 OFFBOARD, ArduPilot GUIDED), ``holding`` (PX4 HOLD/POSCTL/ORBIT, ArduPilot
     LOITER/BRAKE), ``returning`` (RTL before its landing), ``landing`` (LAND, or RTL's final landing), ``manual``
-    (ArduPilot STABILIZE: no pilot input, so throttle low), ``mission`` (PX4 Mission mode, flying a stored mission)."""
+    (ArduPilot STABILIZE: no pilot input, so throttle low), ``mission`` (PX4 Mission mode, ArduPilot AUTO: flying
+    an uploaded mission)."""
     last_setpoint_s: float | None
     """Simulated time of the last accepted setpoint (s), None before the first."""
     setpoint_timeout_s: float

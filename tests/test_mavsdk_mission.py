@@ -8,7 +8,8 @@ with MISSION_COUNT / MISSION_REQUEST_INT / MISSION_ITEM_INT / MISSION_ACK, and f
 MISSION_CURRENT and MISSION_ITEM_REACHED. MAVSDK refuses the transfer outright against a vehicle whose
 AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_MISSION_INT, as the simulator's did before missions were emulated.
 MAVSDK-Python's ``examples/geofence.py`` uploads a fence the same way (mission type FENCE), and the vehicle then
-keeps to it.
+keeps to it. Against ArduPilot MAVSDK's Mission plugin refuses to upload (INVALID_ARGUMENT, before sending anything:
+MAVSDK-Python issue #819, MAVSDK #2029); MissionRaw is MAVSDK's way there, with home as item 0.
 """
 from __future__ import annotations
 
@@ -17,11 +18,12 @@ import math
 
 import pytest
 
-from test_mavsdk_flight import SPEED, T, autopilot_at, bounded, first, vehicle_server
+from test_mavsdk_flight import COMPANION_STREAMS, SPEED, T, autopilot_at, bounded, first, vehicle_server
 
 from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402  (skipped with test_mavsdk_flight's importorskip)
 from mavsdk.asyncio.plugins.geofence import FenceType, GeofenceAsync, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionItem as RawItem, MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
@@ -160,3 +162,57 @@ def test_mavsdk_geofence_example_uploads_a_fence_the_vehicle_keeps_to(udp_ports)
     assert [(area.inclusion, len(area.vertices)) for area in vehicle.autopilot.fence_areas] == [(True, 4)]
     assert "Geofence: approaching or outside geofence" in heard
     assert vehicle.autopilot.mode.name == "HOLD" and 7.0 <= vehicle.state.east_m < 11.0  # held at the fence, not at 40 m
+
+
+async def fly_raw_mission_on_ardupilot(port: int, server) -> dict:
+    """MissionRaw: home, takeoff to 12 m, two waypoints, RTL (MAVSDK's ArduPilot integration test's shape), upload,
+    arm, start (AUTO; AUTO_OPTIONS bit 1 lets the takeoff go without a throttle stick), until landed again."""
+    vehicle, flown = server.vehicle, {"progress": []}
+    async with autopilot_at(port) as system:
+        mission, telemetry, action = MissionRawAsync(system), TelemetryAsync(system), ActionAsync(system)
+
+        async def progress():
+            async for step in mission.subscribe_mission_progress():
+                flown["progress"].append((step.current, step.total))
+
+        def raw(seq: int, command: int, frame: int, x: int = 0, y: int = 0, z: float = 0.0) -> RawItem:
+            return RawItem(seq, frame, command, int(seq == 0), 1, 0.0, 0.0, 0.0, 0.0, x, y, z, 0)
+
+        progress_task = asyncio.ensure_future(progress())
+        try:
+            home = vehicle.home
+            items = [raw(0, 16, 0, round(home.lat_deg * 1e7), round(home.lon_deg * 1e7), home.alt_m),
+                     raw(1, 22, 3, z=12.0)]
+            for seq, (north, east) in enumerate(WAYPOINTS_NE[:2], start=2):
+                lat, lon, _ = vehicle.frame.to_geodetic(north, east, 0.0)
+                items.append(raw(seq, 16, 3, round(lat * 1e7), round(lon * 1e7), 12.0))
+            items.append(raw(4, 20, 2))
+            await bounded(mission.upload_mission(items))
+            flown["stored"] = [item.command for item in vehicle.copter_missions.items]
+            await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_home_position_ok,
+                        20, "global position and home")
+            await bounded(action.arm())
+            await bounded(mission.start_mission())
+            flown["mode"] = vehicle.autopilot.mode.name
+            await first(telemetry.subscribe_in_air(), bool, 30, "in the air")
+            await first(telemetry.subscribe_in_air(), lambda in_air: not in_air, 150 / SPEED, "landed")
+            flown["finished"] = await bounded(mission.is_mission_finished())
+            flown["downloaded"] = [(i.seq, i.command, i.frame, i.z) for i in await bounded(mission.download_mission())]
+        finally:
+            progress_task.cancel()
+    return flown
+
+
+def test_mavsdk_mission_raw_flies_an_ardupilot_mission_in_auto(udp_ports):
+    server, mavsdk_port = vehicle_server(udp_ports, 23, "ardupilot", {**COMPANION_STREAMS, "AUTO_OPTIONS": 2})
+    with server:
+        flown = asyncio.run(asyncio.wait_for(fly_raw_mission_on_ardupilot(mavsdk_port, server), 200))
+        assert server.error is None and server.vehicle.handler_errors == 0
+        vehicle = server.vehicle
+    assert flown["stored"] == [22, 16, 16, 20] and flown["mode"] == "AUTO"  # home (item 0) is not stored
+    assert flown["finished"] is True and (5, 5) in flown["progress"]
+    home_alt = round(vehicle.home.alt_m, 2)
+    assert [(seq, cmd, frame, round(z, 2)) for seq, cmd, frame, z in flown["downloaded"]] == [
+        (0, 16, 0, home_alt), (1, 22, 3, 12.0), (2, 16, 3, 12.0), (3, 16, 3, 12.0), (4, 20, 0, 0.0)]
+    assert vehicle.state.on_ground and not vehicle.autopilot.armed
+    assert math.hypot(vehicle.state.north_m, vehicle.state.east_m) < 1.5
