@@ -177,7 +177,7 @@ def test_mavproxy_loads_lists_and_flies_a_px4_mission(udp_ports, tmp_path):
         assert all("15.000000" in line and "p2=2.0" in line for line in listed)
         mavproxy.send("arm throttle")
         mavproxy.expect("COMPONENT_ARM_DISARM: ACCEPTED")
-        mavproxy.send("long DO_SET_MODE 29 4 4")  # MAVProxy's "mode MISSION" wants a number for PX4
+        mavproxy.send("long DO_SET_MODE 29 4 4")  # "mode MISSION" fails inside MAVProxy for PX4 (docs/sitl.md)
         mavproxy.expect("DO_SET_MODE: ACCEPTED")
         mavproxy.expect("Climb to 15.0 meters above home")
         assert vehicle.autopilot.mode is FlightMode.MISSION
