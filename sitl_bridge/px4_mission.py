@@ -67,7 +67,7 @@ class Px4MissionMode:
         last = max(len(items) - 1, 0)
         self.mission_current = current_seq if current_seq >= 0 else min(max(self.mission_current, 0), last)
         self.mission_reached, self.mission_finished = -1, False
-        self.mission_valid = self.check_mission(now, state)
+        self.check_mission(now, state)
         if self.mode is FlightMode.MISSION and self.armed:
             if self.mission_valid:
                 self._start_mission(now, state)  # PX4 flies the new mission at once
@@ -83,10 +83,12 @@ class Px4MissionMode:
             self._climb = self._climb_needed(state)
 
     def check_mission(self, now: float, state: VehicleState, announce: bool = True) -> bool:
-        """MissionFeasibilityChecker::checkMissionFeasible; the reasons go out as PX4's texts."""
+        """MissionFeasibilityChecker::checkMissionFeasible (kept as ``mission_valid``); the reasons go out as PX4's
+        texts when ``announce``."""
+        failures = self._infeasible(state) if self.mission_items else ["no mission"]
+        self.mission_valid = not failures
         if not self.mission_items:
             return False
-        failures = self._infeasible(state)
         if announce:
             for text in failures:  # all mavlink_log_critical but the position lock's (info)
                 self._event(now, text, mavlink.MAV_SEVERITY_INFO if "position lock" in text
