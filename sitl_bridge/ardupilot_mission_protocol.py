@@ -27,6 +27,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_bridge.ardupilot_targets import LOCATION_ALT_MAX_M
 from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.mission_protocol import ABSOLUTE_FRAMES, RELATIVE_FRAMES, MissionItem, item_message
 
@@ -41,7 +42,6 @@ LOCATION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, 
 OTHER_COMMANDS = (mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_CHANGE_SPEED)
 NAN_PARAM4 = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_LOITER_UNLIM, mavlink.MAV_CMD_NAV_LAND,
               mavlink.MAV_CMD_NAV_TAKEOFF)  # sanity_check_params: only these may have a NaN param4
-ALT_MAX_M = 83000  # Location's altitude field
 
 
 def parse_copter_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
@@ -60,7 +60,7 @@ def parse_copter_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
         return mavlink.MAV_MISSION_INVALID_PARAM5_X
     if not (math.isfinite(lon) and abs(lon) <= 180.0):
         return mavlink.MAV_MISSION_INVALID_PARAM6_Y
-    if not (math.isfinite(msg.z) and abs(msg.z) < ALT_MAX_M):
+    if not (math.isfinite(msg.z) and abs(msg.z) < LOCATION_ALT_MAX_M):
         return mavlink.MAV_MISSION_INVALID_PARAM7
     if msg.frame not in (mavlink.MAV_FRAME_MISSION, *ABSOLUTE_FRAMES, *RELATIVE_FRAMES):
         return mavlink.MAV_MISSION_UNSUPPORTED_FRAME  # terrain frames too: no terrain data is simulated

@@ -142,7 +142,7 @@ class Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, Au
             if (source_component == MISSION_PLANNER_COMPONENT
                     and now - self._last_reject_print_s > REJECT_PRINT_INTERVAL_S):
                 self._last_reject_print_s = now
-                self._event(now, f"Switching to {mode.name.capitalize()} is currently not available",
+                self._event(now, f"Switching to {mode.name.capitalize()} is currently not available\t",
                             mavlink.MAV_SEVERITY_CRITICAL)
             return TEMPORARILY_REJECTED
         self.offboard_fallback = False  # any switch but the fallback's own ends it (the caller sets it after)
@@ -364,8 +364,11 @@ class Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, Au
             return self._mission_command(now, state)
         if mode is FlightMode.ORBIT and self.orbit is not None and not state.on_ground:
             return self.orbit.command(state, self.airframe, self.params["MPC_XY_CRUISE"])
-        # HOLD, POSCTL (sticks centred) and an orbit whose radius was refused: keep the captured position (or fly
-        # to a reposition's); on the ground stay down.
+        return self._hold_command(state)
+
+    def _hold_command(self, state: VehicleState) -> VelocityCommand:
+        """HOLD, POSCTL (sticks centred), an orbit whose radius was refused and Mission mode's waits: keep the
+        captured position (or fly to a reposition's); on the ground stay down."""
         north, east, down = self.hold_target
         if state.on_ground and down >= 0.0:
             return HOVER

@@ -29,7 +29,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, TEMPORARILY_REJECTED
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.mission_protocol import MissionItem
-from sitl_bridge.multirotor import HOVER, VehicleState, VelocityCommand
+from sitl_bridge.multirotor import VehicleState, VelocityCommand
 from sitl_bridge.px4_modes import FlightMode
 
 ACTIVE_MODES = (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.LAND)  # update_mission_state's "active"
@@ -284,9 +284,3 @@ class Px4MissionMode:
         self.mission_finished = True
         self._event(now, "Mission finished, landed\t" if state.on_ground else "Mission finished, loitering\t")
         self.hold_target = (state.north_m, state.east_m, 0.0 if state.on_ground else state.down_m)
-
-    def _hold_command(self, state: VehicleState) -> VelocityCommand:
-        north, east, down = self.hold_target
-        if state.on_ground and down >= 0.0:
-            return HOVER
-        return velocity_toward(state, north, east, down, self.airframe, speed_xy_mps=self.params["MPC_XY_CRUISE"])

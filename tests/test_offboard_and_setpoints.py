@@ -46,7 +46,7 @@ def fly(pilot: LockstepPilot, seconds: float) -> None:
 # ---------------------------------------------------------------- the switch into OFFBOARD
 # PX4's rule (OffboardChecks::checkAndReport): OFFBOARD can run while the last setpoint is newer than COM_OF_LOSS_T.
 # Commander answers DO_SET_MODE with TEMPORARILY_REJECTED otherwise, and printRejectMode() says so to component 190.
-REJECT_TEXT = "Switching to Offboard is currently not available"
+REJECT_TEXT = "Switching to Offboard is currently not available\t"  # PX4 ends its mavlink_log texts with a tab
 
 
 def statustexts(pilot: LockstepPilot, since: int = 0) -> list[str]:
