@@ -6,8 +6,10 @@ checkout (a git worktree) would otherwise import that one's packages. Import it 
 """
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
+import platform
 import statistics
 import subprocess
 import sys
@@ -34,8 +36,13 @@ def summarise(runs: dict[str, list[float]], title: str) -> dict[str, float]:
 
 
 def write_report(path: str, report: dict) -> None:
-    """Write the report (plus the command and the time it was measured) to ``path`` atomically."""
-    report = {"command": "python " + " ".join(sys.argv), **report, "code": code_version(),
+    """Write the report (plus the command, the code, the machine and the time it was measured) to ``path``
+    atomically. A script's own ``machine`` entry is kept as the machine's ``note``."""
+    report = dict(report)
+    machine = machine_info()
+    if "machine" in report:
+        machine["note"] = report.pop("machine")
+    report = {"command": "python " + " ".join(sys.argv), **report, "code": code_version(), "machine": machine,
               "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     with open(path + ".tmp", "w") as handle:
@@ -55,3 +62,25 @@ def code_version() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return commit + ("+changes" if changed else "")
+
+
+def machine_info() -> dict[str, object]:
+    """What the figures were measured on: the CPU model, its logical cores, the Python and torch versions."""
+    try:
+        torch_version = importlib.metadata.version("torch")
+    except importlib.metadata.PackageNotFoundError:
+        torch_version = None
+    return {"cpu": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
+            "torch": torch_version}
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (Linux), else what ``platform`` knows."""
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
