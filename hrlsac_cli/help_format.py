@@ -1,4 +1,5 @@
-"""The help formatter of every ``hrlsac`` subcommand (here, in the package every other one may import)."""
+"""The help formatter of every ``hrlsac`` subcommand (beside the dispatcher; it imports nothing of the project, so
+every package's command module may import it)."""
 from __future__ import annotations
 
 import argparse

@@ -1,8 +1,8 @@
 """MAVLink 2 message signing shared by the vehicle and the companion computer: key files and frame checks.
 
-It lives in ``missions`` because both sides need it and ``missions`` is the one package both ``sitl_bridge``
-(the simulated vehicle) and ``autonomy`` (the companion computer, which must not import the simulator) may
-import. It uses the standard library only; it works on raw frames and on pymavlink's parser by duck typing.
+A package of its own at the bottom of the house, because both sides need it: ``sitl_bridge`` (the simulated vehicle)
+and ``autonomy`` (the companion computer, which must not import the simulator). It uses the standard library only;
+it works on raw frames and on pymavlink's parser by duck typing. ``hrlsac keygen`` is :mod:`.keygen_cli`.
 
 The signing spec (https://mavlink.io/en/guide/message_signing.html) in one paragraph: a signed MAVLink 2 frame
 sets bit 0 of ``incompat_flags`` and ends with 13 bytes: link id (1), timestamp (6, little-endian, units of

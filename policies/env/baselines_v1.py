@@ -40,12 +40,12 @@ import numpy as np
 from missions import belief as belief_logic
 from missions import goals as goal_logic
 from missions import search
-from missions.belief_search import arrival_speed_fraction
+from missions.search_state_v1 import arrival_speed_fraction
 from missions.sweep_width import sweep_width_m
 from missions.validation import check_fields
 
 if TYPE_CHECKING:
-    from policies.env.ambiguous import AmbiguousSearchBatch
+    from policies.env.task_v1 import AmbiguousSearchBatch
 
 MAX_WAYPOINTS = 256
 

@@ -1,7 +1,7 @@
 """SarSearch-v1's environment core: N searches with ambiguous sightings, close looks, a belief and an endurance.
 
 The same frame as SarSearch-v0 (:class:`policies.env.core.FlownSearch`: scenario pool, exact multirotor dynamics,
-observations), on the search state of ``missions.belief_search`` that the mission runner's pilot flies too. One
+observations), on the search state of ``missions.search_state_v1`` that the mission runner's pilot flies too. One
 step: the action (movement in [-1, 1], north/east or towards / right of the target (``action_frame``), search
 intensity and zoom in [0, 1]) becomes a velocity command, passes the safety shield (``missions.shield``: danger
 zones and geofence, as the pilot applies it in flight) and is flown for one period;
@@ -25,12 +25,12 @@ from __future__ import annotations
 import numpy as np
 
 from autonomy.observation import LAYOUT_V4
-from missions.belief_search import CONFIRMED, RETURN_RESERVE, BeliefSearchState
+from missions.search_state_v1 import CONFIRMED, RETURN_RESERVE, BeliefSearchState
 from policies.env.core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_TARGET, FlownSearch, SarSearchConfig
 
 REWARD_RAN_DRY = -50.0
 REWARD_RETURNED = 20.0
-"""For coming home with at least ``missions.belief_search.RETURN_RESERVE`` of the endurance left."""
+"""For coming home with at least ``missions.search_state_v1.RETURN_RESERVE`` of the endurance left."""
 
 
 class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):

@@ -1,6 +1,6 @@
 """The state of N searches of SarSearch-v1, advanced one decision step at a time: what training and flight share.
 
-The training environment (``policies.env.ambiguous``) and the mission runner's pilot (``autonomy.search_pilot``)
+The training environment (``policies.env.task_v1``) and the mission runner's pilot (``autonomy.search_pilot``)
 both keep a :class:`BeliefSearchState`; they differ only in where the drone's position comes from. What the
 search logic knows is what a crew knows: the area, the charted danger zones, the datum and its forecast drift,
 the conditions, its own position and its own sightings. Which object is the victim it learns only from a close
@@ -38,7 +38,7 @@ from missions import search
 from missions.goals import NO_GOAL, TRACK_OBJECT
 from missions.mission import FlightSettings
 from missions.scenario import CATEGORIES
-from missions.search_state import checked_goals, keyed_uniforms
+from missions.search_state_v0 import checked_goals, keyed_uniforms
 
 TARGET_SLOTS = 16
 """Target slots of a scenario in SarSearch-v1 (the environment's and the pilot's): the detection draws are keyed by
@@ -65,11 +65,11 @@ LEFT_HOME_M = 50.0
 """The search has left home once the drone was this far from it; only then does coming back end it."""
 RETURN_RESERVE = 0.1
 """Share of the endurance a crew keeps for landing: a return home with at least this much left pays
-(``policies.env.ambiguous``)."""
+(``policies.env.task_v1``)."""
 BINGO_RESERVE_S = 20.0
 """The bingo call, a decision event, comes on the step after which the way home at full speed would leave no more
 than this (s): the last decision that can still bring the drone home (the scripted searchers turn home with the
-same reserve, ``policies.env.baselines.TUNED``). Later, the next decision may come too late."""
+same reserve, ``policies.env.baselines_v1.TUNED``). Later, the next decision may come too late."""
 IDENTIFY_STREAM = np.uint64(0x1D5EED)
 """Mixed into the episode seed for the identification draws: a stream of their own beside the detections'."""
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from missions.signing import KeyFileError, generate_key, write_key_file
+from mavlink_signing import KeyFileError, generate_key, write_key_file
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:

@@ -22,7 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("policies.cli.export", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
     "policy": ("autonomy.policy_cli", "inspect an exported policy artifact (policy info) with the on-board runtime"),
     "mission": ("", "fly a search mission with a policy: replay in the simulated vehicle, or run"),
-    "keygen": ("missions.keygen_cli", "write a fresh MAVLink 2 signing key file (for --signing-key)"),
+    "keygen": ("mavlink_signing.keygen_cli", "write a fresh MAVLink 2 signing key file (for --signing-key)"),
 }
 
 # Commands whose subcommands live in different packages: name -> {subcommand: (module, summary)}. The replay
@@ -118,7 +118,3 @@ def main(argv: list[str] | None = None) -> int:
             print(f"hrlsac {name}: error: unexpected {detail} (a bug, please report it; rerun with {TRACEBACK_ENV}=1 "
                   "for the traceback)", file=sys.stderr)
         return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
