@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from missions.belief_search import CLOSE_LOOK_ALTITUDE_M
+from missions.search_state_v1 import CLOSE_LOOK_ALTITUDE_M
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.mission import Mission
 

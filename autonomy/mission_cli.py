@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from hrlsac_cli import GROUPS
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 
 DEFAULT_OUT = Path("mission-output")
 RUN_SUMMARY = GROUPS["mission"]["run"][1]  # written once, in the dispatcher's table (``hrlsac mission --help``)
@@ -41,7 +41,7 @@ def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argpar
     error line. ``check`` validates the subcommand's own arguments (raising ValueError)."""
     from autonomy.policy import PolicyArtifactError, load_policy
     from missions.mission_file import MissionFileError, load_mission
-    from missions.signing import load_key_file
+    from mavlink_signing import load_key_file
 
     try:
         mission = load_mission(args.mission)
@@ -104,7 +104,7 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     from autonomy.runner import MissionRunner, WallClock
     from autonomy.search_pilot import SearchPilot
     from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
-    from missions.signing import wall_timestamp
+    from mavlink_signing import wall_timestamp
 
     clock = WallClock()
     out.mkdir(parents=True, exist_ok=True)

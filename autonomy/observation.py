@@ -226,8 +226,8 @@ def observe_search(state, goal_conditioned: bool, rows: np.ndarray | None = None
                    out: np.ndarray | None = None) -> np.ndarray:
     """The observations of a search state (all searches, or ``rows``): what the environment and the mission
     runner both give the policy. ``goal_conditioned``: HRL-SAC's target and goal one-hot; otherwise flat SAC's.
-    A ``missions.search_state.SearchState`` (SarSearch-v0) gives layout 3, a
-    ``missions.belief_search.BeliefSearchState`` (SarSearch-v1) layout 4."""
+    A ``missions.search_state_v0.SearchState`` (SarSearch-v0) gives layout 3, a
+    ``missions.search_state_v1.BeliefSearchState`` (SarSearch-v1) layout 4."""
     if hasattr(state, "belief"):
         return _observe_belief_search(state, goal_conditioned, rows, out)
     rows = slice(None) if rows is None else rows

@@ -78,7 +78,7 @@ class Policy:
         (``missions.goals.goal_due``: steps 0, K, 2K, ... since the last decision); never for a flat policy. For
         loops of your own (docs/export.md). On SarSearch-v1 the flight pilot also decides at once after a decision
         event (a new candidate, the bingo call), which its search state tells:
-        ``missions.belief_search.BeliefSearchState.goal_due``."""
+        ``missions.search_state_v1.BeliefSearchState.goal_due``."""
         return self.hierarchical and bool(goal_due(step, self.manifest.subgoal_interval))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:

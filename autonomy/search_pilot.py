@@ -2,7 +2,7 @@
 
 Each decision step (``FlightSettings.step_period_s``) the runner hands :meth:`SearchPilot.decide` the drone's
 filtered (north, east) in the mission frame. The pilot then does exactly what the training environment
-(SarSearch-v1) does after its dynamics step, with the same ``missions.belief_search.BeliefSearchState`` (belief,
+(SarSearch-v1) does after its dynamics step, with the same ``missions.search_state_v1.BeliefSearchState`` (belief,
 candidates, confirmation rule, endurance) and the same observation builder:
 
 1. advance the search state to that position with the sensor settings of the previous decision: the camera's
@@ -11,14 +11,14 @@ candidates, confirmation rule, endurance) and the same observation builder:
 2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
 3. act on the observation: movement in [-1, 1] scaled to the mission's speed limit (north/east, or towards and to
    the right of the observation's target, slowing on the last step with "arrive", when the artifact was trained so:
-   its ``action_frame``, ``missions.belief_search.movement_velocity``), search
+   its ``action_frame``, ``missions.search_state_v1.movement_velocity``), search
    intensity and camera zoom in [0, 1], the velocity passed through the environment's safety shield (danger zones,
    geofence: ``missions.shield``); during a close look, :attr:`Decision.altitude_m` asks the runner for the
    close-look altitude (the search state's ``altitude_target``), which it flies with vertical velocity.
 
 The camera is simulated in every mode, also against a real autopilot: a real payload would feed its
 detections here instead (not built; see docs/runner.md). The search state models the camera's altitude itself
-(descent and climb at the rates of ``missions.belief_search``), so the runner's altitude controller need not match
+(descent and climb at the rates of ``missions.search_state_v1``), so the runner's altitude controller need not match
 it to the metre.
 
 :class:`DecisionWorker` runs ``decide`` off the runner's control loop, which must keep streaming setpoints whatever
@@ -35,7 +35,7 @@ import numpy as np
 
 from autonomy.observation import LAYOUT_V4, observe_search
 from autonomy.policy import Policy
-from missions.belief_search import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, movement_velocity
+from missions.search_state_v1 import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, movement_velocity
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
 from missions.search import ScenarioBatch
@@ -48,7 +48,7 @@ and within the reach radius."""
 BINGO_FAILSAFE_S = 10.0
 """The pilot ends the search ("bingo failsafe"; the runner's RTL then flies home) once flying home at full speed
 would leave no more than this of the sortie's endurance, whatever the policy chose. The meta-controller had its
-bingo call at ``missions.belief_search.BINGO_RESERVE_S`` (20 s); a learned policy is not trusted with the last of
+bingo call at ``missions.search_state_v1.BINGO_RESERVE_S`` (20 s); a learned policy is not trusted with the last of
 the fuel, as PX4's and ArduPilot's battery failsafes do not trust a companion computer with the battery."""
 
 

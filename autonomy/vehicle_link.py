@@ -11,7 +11,7 @@ connection instead. :class:`VehicleLink` then does what every companion computer
 * sends COMMAND_LONG, SET_MESSAGE_INTERVAL and velocity setpoints, and reads the parameters it is asked for;
 * hands every message, both directions, to an optional recorder (the tlog) with the run's clock;
 * with a signing key, signs everything it sends (timestamps from the run's clock), drops wrongly signed and
-  replayed messages, and warns once when the vehicle's messages arrive unsigned (see missions.signing).
+  replayed messages, and warns once when the vehicle's messages arrive unsigned (see mavlink_signing).
 
 It does not wait for anything itself: the runner owns time (simulated in lockstep, real otherwise) and waits by
 ticking; see ``autonomy.runner``.
@@ -31,7 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand, setpoint_message_args
 from missions.geodesy import GeoPoint
-from missions.signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_timestamp
+from mavlink_signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_timestamp
 
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 1.0
@@ -115,7 +115,7 @@ class VehicleLink:
     """MAVLink 2 signing secret (32 bytes); None: send unsigned, accept everything."""
     signing_timestamp: Callable[[], int] | None = None
     """Signing clock (10 us units since 2015); default: ``clock`` from the MAVLink epoch (lockstep replays).
-    Flights in real time pass missions.signing.wall_timestamp, as real autopilots expect."""
+    Flights in real time pass mavlink_signing.wall_timestamp, as real autopilots expect."""
     warn: Callable[[str], None] = lambda text: None
     """Where warnings go (the runner's log)."""
     signing: LinkSigning | None = field(default=None, init=False)

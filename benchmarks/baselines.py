@@ -23,7 +23,7 @@ import time
 from common import results_file, write_report
 
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines import BASELINES
+from policies.env.baselines_v1 import BASELINES
 from policies.env.baselines_v0 import BASELINES_V0
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.baselines import run_baseline

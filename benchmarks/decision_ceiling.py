@@ -2,7 +2,7 @@
 
 A learned meta-controller can beat the best scripted searcher only by deciding better than its fixed rules. This
 measures, on the same scenarios and detection draws, what perfect versions of each decision would be worth to the
-tuned greedy Bayes searcher (``policies.env.baselines``, ``TUNED["greedy_bayes"]``):
+tuned greedy Bayes searcher (``policies.env.baselines_v1``, ``TUNED["greedy_bayes"]``):
 
 * **oracle skip**: which candidate is the victim is known, so the drone never flies to a decoy for a close look (one
   beside the victim may still be identified in passing during the victim's own; the victim still needs its close
@@ -31,7 +31,7 @@ best of these. ``--decoys MIN,MAX`` flies a variant of the task's scenario distr
 ``--generator FILE`` starts from a generator config file instead (``hrlsac evaluate --generator``'s format, e.g.
 docs/results/large-area.yaml, the 2 km square). ``--identify-factor F`` makes a close look costlier (another task
 design probe): identification becomes detection at F times the object's size instead of
-``missions.belief_search.IDENTIFY_SIZE_FACTOR`` (1/6.4, Johnson's criteria), so a look hovers longer; the victim-known
+``missions.search_state_v1.IDENTIFY_SIZE_FACTOR`` (1/6.4, Johnson's criteria), so a look hovers longer; the victim-known
 searcher's time to success shows what a look then costs. ``--neighbourhoods K,...`` flies greedy Bayes scoring each
 region by the belief within K cells of a cell, then flying to the region's best cell (``NeighbourhoodGreedy``): is
 a less myopic scripted rule stronger, above all on the 2 km square where cells lie far apart? ``--rollouts H,...``
@@ -54,8 +54,8 @@ import sys
 import numpy as np
 from common import results_file, write_report
 
-import missions.belief_search
-from missions.belief_search import TARGET_SLOTS
+import missions.search_state_v1
+from missions.search_state_v1 import TARGET_SLOTS
 from missions.coverage import GRID_SIZE
 from missions.generator import TASK_V1
 from missions.mission import FlightSettings
@@ -63,7 +63,7 @@ from missions.scenario import CATEGORIES
 from missions.search import OBJECT_SIZE_M
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
+from policies.env.baselines_v1 import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -189,7 +189,7 @@ def main() -> int:
                         "within that many cells of it (a less myopic choice)")
     parser.add_argument("--rollouts", type=numbers, default=[],
                         help="comma-separated lookahead horizons (s): greedy Bayes choosing each next cell by "
-                        "rollouts in the belief (policies.env.baselines.LookaheadBayes; greedy Bayes' tuned settings)")
+                        "rollouts in the belief (policies.env.baselines_v1.LookaheadBayes; greedy Bayes' tuned settings)")
     parser.add_argument("--rollout-options", type=int, default=6, help="cells each lookahead tries (default 6)")
     parser.add_argument("--identify-factor", type=float, default=None,
                         help="identification is detection at this share of the object's size (default: the task's, "
@@ -212,7 +212,7 @@ def main() -> int:
             parser.error(f"--identify-factor must be in (0, 1] (the task's is 1/6.4), got {args.identify_factor}")
         # A probe of task designs, not a setting of the task: the episodes run in this process, where the belief
         # search reads the module's constant at every step.
-        missions.belief_search.IDENTIFY_SIZE_FACTOR = args.identify_factor
+        missions.search_state_v1.IDENTIFY_SIZE_FACTOR = args.identify_factor
     greedy = TUNED["greedy_bayes"]
     oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
     patterns = {
@@ -250,7 +250,7 @@ def main() -> int:
               "episodes": args.episodes, "stream": args.stream, "generator_file": args.generator,
               "decoys": [generator.decoys_min, generator.decoys_max],
               "decoy_spread_sigmas": generator.decoy_spread_sigmas,
-              "identify_size_factor": missions.belief_search.IDENTIFY_SIZE_FACTOR,
+              "identify_size_factor": missions.search_state_v1.IDENTIFY_SIZE_FACTOR,
               "sweep_rate_m2_per_s": sweep_rates(FlightSettings()), "results": {}}
     found = []
     for name, make in {**patterns, **skips, **oracles}.items():

@@ -9,7 +9,7 @@ import argparse
 import sys
 import time
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 from missions.datasets import YoloDataset
 from missions.scenario import CATEGORIES
 from missions.yolo_labels import DatasetError, DatasetSummary

@@ -42,7 +42,7 @@ def goal_due(steps, subgoal_interval: int, event=False):
     at the start, every K = ``subgoal_interval`` steps after (0, K, 2K, ...), and at once on an event. The one
     statement of the cadence: training, evaluation, the export's parity check and the flight pilot all ask it,
     through the search state's ``goal_due`` (SarSearch-v0 counts the episode's steps and has no events; v1 counts
-    from the last decision and has two, ``missions.belief_search.BeliefSearchState.decision_event``)."""
+    from the last decision and has two, ``missions.search_state_v1.BeliefSearchState.decision_event``)."""
     return (steps % subgoal_interval == 0) | event
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from missions import search
 from missions.goals import GOAL_NAMES
 from missions.scenario import CATEGORIES
-from missions.search_state import SearchState
+from missions.search_state_v0 import SearchState
 
 SIZE_PX = 512
 # BGR-free: colours are RGB because the image is returned as RGB.

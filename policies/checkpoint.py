@@ -25,9 +25,14 @@ from policies.env.core import ACTION_HIGH, ACTION_LOW
 CHECKPOINT = "checkpoint.pt"
 """The checkpoint file of a run folder."""
 
-MOVED_MODULES = {"policies.env_core": "policies.env.core", "policies.ambiguous_env": "policies.env.ambiguous"}
-"""Where the classes of a pickled environment live now, for checkpoints written before ``policies`` had
-sub-packages (their pickles name the old modules)."""
+MOVED_MODULES = {"policies.env_core": "policies.env.core", "policies.ambiguous_env": "policies.env.task_v1",
+                 "policies.env.ambiguous": "policies.env.task_v1", "policies.env.baselines": "policies.env.baselines_v1",
+                 "missions.search_state": "missions.search_state_v0", "missions.belief_search": "missions.search_state_v1",
+                 "missions.signing": "mavlink_signing"}
+"""Where the classes of a pickled environment live now, for checkpoints written with an earlier module layout (their
+pickles name the old modules)."""
+MOVED_CLASSES = {("policies.env.core", "SarSearchBatch"): "policies.env.task_v0"}
+"""Classes that left a module that still exists: (old module, class) -> the module that holds the class now."""
 
 
 def atomic_torch_save(obj, path: Path) -> None:
@@ -39,7 +44,8 @@ def atomic_torch_save(obj, path: Path) -> None:
 
 class _EnvironmentUnpickler(pickle.Unpickler):
     def find_class(self, module: str, name: str):
-        return super().find_class(MOVED_MODULES.get(module, module), name)
+        module = MOVED_MODULES.get(module, module)
+        return super().find_class(MOVED_CLASSES.get((module, name), module), name)
 
 
 def dump_environment(core) -> bytes:

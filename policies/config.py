@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
-from missions.belief_search import check_action_frame
+from missions.search_state_v1 import check_action_frame
 from missions.mission import FlightSettings
 from missions.validation import Interval, check_choice, check_fields
 
@@ -67,7 +67,7 @@ class TrainConfig:
     flight: FlightSettings = field(default_factory=FlightSettings)
     """Altitude, speed, decision period, K (subgoal_interval), step limit and reach radius."""
     action_frame: str = "north_east"
-    """How the policy's movement is read (``SarSearchConfig.action_frame``, ``missions.belief_search.ACTION_FRAMES``):
+    """How the policy's movement is read (``SarSearchConfig.action_frame``, ``missions.search_state_v1.ACTION_FRAMES``):
     "north_east" (the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to its
     right) or "arrive" (as "target", slowing on the last step so that the constant action (1, 0) stops on the
     target); the exported artifact's manifest carries it and the flight pilot reads it the same way."""
@@ -169,12 +169,12 @@ class TrainConfig:
     it will fly with, so ``meta_only_steps`` must be above 0). Random goals keep a meta-controller that learns
     against an early, clumsy low level from collapsing onto the goal that costs least per segment (hovering at
     home) while the low level still has everything to learn. On SarSearch-v1, random goals (and the warm-up's)
-    are ReturnToBase from the bingo call on (``missions.belief_search.BINGO_RESERVE_S``): uniform goals almost never
+    are ReturnToBase from the bingo call on (``missions.search_state_v1.BINGO_RESERVE_S``): uniform goals almost never
     bring a drone all the way home, and a low level that never learned to land there could not end a sortie at
     home, whatever the meta-controller chose (docs/results/README.md, the v1 probes)."""
     meta_returned_reward: float | None = None
     """SarSearch-v1: what a return home with reserve pays in the meta-controller's learning reward, in place of the
-    environment's +20 (``policies.env.ambiguous.REWARD_RETURNED``); None = the environment's. The task, its reward
+    environment's +20 (``policies.env.task_v1.REWARD_RETURNED``); None = the environment's. The task, its reward
     and its success are unchanged: only what the meta-controller learns from. Why: +20 for any return after a
     short excursion makes going home at once the meta-controller's easiest return."""
     meta_belief_bonus: float = 0.0

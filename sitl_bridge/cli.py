@@ -7,9 +7,9 @@ import signal
 import sys
 import time
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 from missions.geodesy import GeoPoint
-from missions.signing import load_key_file
+from mavlink_signing import load_key_file
 from sitl_bridge.ardupilot_params import STREAM_GROUPS, STREAM_LINKS
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults

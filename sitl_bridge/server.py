@@ -15,7 +15,7 @@ import threading
 from dataclasses import dataclass
 from typing import Callable
 
-from missions.signing import wall_timestamp
+from mavlink_signing import wall_timestamp
 from sitl_bridge.autopilot import AutopilotEvent
 from sitl_bridge.clock import PacedClock
 from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now

@@ -1,4 +1,4 @@
-"""The simulated vehicle's side of MAVLink 2 signing: PX4's rules on top of :mod:`missions.signing`.
+"""The simulated vehicle's side of MAVLink 2 signing: PX4's rules on top of :mod:`mavlink_signing`.
 
 With a key, the vehicle signs everything it sends and accepts only correctly signed, fresh frames, except the
 few messages PX4 accepts unsigned (``PX4_UNSIGNED_ALLOW_LIST``: radios and traffic receivers cannot sign).
@@ -11,7 +11,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from missions.signing import KEY_BYTES, LinkSigning
+from mavlink_signing import KEY_BYTES, LinkSigning
 
 PX4_UNSIGNED_ALLOW_LIST = frozenset({
     mavlink.MAVLINK_MSG_ID_HEARTBEAT,
@@ -22,7 +22,7 @@ PX4_UNSIGNED_ALLOW_LIST = frozenset({
 
 
 def vehicle_signing(key: bytes, now: Callable[[], int]) -> LinkSigning:
-    """The vehicle's signing state for ``key``, timestamps from ``now`` (see missions.signing)."""
+    """The vehicle's signing state for ``key``, timestamps from ``now`` (see mavlink_signing)."""
     return LinkSigning(key, now, allow_unsigned=PX4_UNSIGNED_ALLOW_LIST.__contains__)
 
 

@@ -19,7 +19,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
-from missions.signing import LinkSigning, simulated_timestamp
+from mavlink_signing import LinkSigning, simulated_timestamp
 from sitl_bridge import dynamics, telemetry
 from sitl_bridge.ardupilot import ArduCopter
 from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
@@ -61,7 +61,7 @@ class SimulatedVehicle(MessageHandlers):
                  on_event: Callable[[AutopilotEvent], None] | None = None,
                  signing_timestamp: Callable[[], int] | None = None):
         """``signing_timestamp``: the signing clock (default: simulated time from the MAVLink epoch, for
-        deterministic lockstep runs; real-time servers pass missions.signing.wall_timestamp)."""
+        deterministic lockstep runs; real-time servers pass mavlink_signing.wall_timestamp)."""
         self.config = config = config or VehicleConfig()
         self.dt_s = 1.0 / config.physics_rate_hz
         self.tick = 0

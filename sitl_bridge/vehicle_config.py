@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from missions.geodesy import GeoPoint
-from missions.signing import KEY_BYTES
+from mavlink_signing import KEY_BYTES
 from missions.validation import check_fields, check_number
 from sitl_bridge.multirotor import MultirotorParams
 from sitl_bridge.sensors import SensorConfig
@@ -40,7 +40,7 @@ class VehicleConfig:
     telemetry_rates_hz: dict[int, float] = field(default_factory=dict)
     """Overrides of the profile's stream rates by message id, on every link (0 disables a stream)."""
     signing_key: bytes | None = field(default=None, repr=False)
-    """MAVLink 2 signing secret (32 bytes, see missions.signing.load_key_file); None: no signing."""
+    """MAVLink 2 signing secret (32 bytes, see mavlink_signing.load_key_file); None: no signing."""
     autopilot: str = "px4"
     """The autopilot personality: "px4" (PX4 custom modes, OFFBOARD) or "ardupilot" (ArduCopter modes, GUIDED)."""
     telemetry_profile: str = "default"
@@ -61,7 +61,7 @@ class VehicleConfig:
                             ("reboot_downtime_s", 0.1, 600.0)), integers=("system_id",))
         if self.signing_key is not None and len(self.signing_key) != KEY_BYTES:
             raise ValueError(f"signing_key must be {KEY_BYTES} bytes, got {len(self.signing_key)}; "
-                             "load it with missions.signing.load_key_file")
+                             "load it with mavlink_signing.load_key_file")
         if self.autopilot not in AUTOPILOT_TYPES:
             raise ValueError(f"VehicleConfig.autopilot must be one of {', '.join(AUTOPILOT_TYPES)}, "
                              f"got {self.autopilot!r}")

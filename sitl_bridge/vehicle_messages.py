@@ -12,7 +12,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge import telemetry
-from missions.signing import LinkSigning
+from mavlink_signing import LinkSigning
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
 from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint

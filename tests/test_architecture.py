@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("missions", "sitl_bridge", "autonomy", "simulation", "policies")
+PACKAGES = ("hrlsac_cli", "mavlink_signing", "missions", "sitl_bridge", "autonomy", "simulation", "policies")
 
 
 def unit_of(module: str) -> str:

@@ -1,4 +1,4 @@
-"""SarSearch-v1's search logic (``missions.belief``, ``missions.belief_search``): the belief's prior, looks, drift
+"""SarSearch-v1's search logic (``missions.belief``, ``missions.search_state_v1``): the belief's prior, looks, drift
 and blur; candidates, close looks and the confirmation rule; the endurance and the return home."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from missions import belief
-from missions.belief_search import (
+from missions.search_state_v1 import (
     BINGO_RESERVE_S,
     CLOSE_LOOK_ALTITUDE_M,
     CONFIRMED,

@@ -15,10 +15,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 from decision_ceiling import KnownVictim, NeighbourhoodGreedy, TruthfulPlausibility, box_sum, fly_scripted  # noqa: E402,E501
 
-from missions.belief_search import REJECTED  # noqa: E402
+from missions.search_state_v1 import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
 from missions.mission import FlightSettings  # noqa: E402
-from policies.env.baselines import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
+from policies.env.baselines_v1 import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
 
 EPISODES = 40
 MANY_DECOYS = dataclasses.replace(TASK_V1, decoys_min=6, decoys_max=10, decoy_spread_sigmas=1.0)
@@ -87,7 +87,7 @@ def test_identify_factor_makes_a_close_look_longer_and_refuses_nonsense(tmp_path
     import json
 
     import decision_ceiling
-    import missions.belief_search as belief_search
+    import missions.search_state_v1 as belief_search
 
     monkeypatch.setattr(belief_search, "IDENTIFY_SIZE_FACTOR", belief_search.IDENTIFY_SIZE_FACTOR)  # restored after
     steps = {}

@@ -11,7 +11,7 @@ import policies  # noqa: F401  (registers SarSearch-v1)
 from autonomy.observation import LAYOUT_V4, PLAN_OFFSET_SCALE_M
 from missions.mission import FlightSettings
 from missions.scenario import Obstacle, Scenario, SearchArea, Target
-from policies.env.ambiguous import RETURN_RESERVE, REWARD_RAN_DRY, REWARD_RETURNED
+from policies.env.task_v1 import RETURN_RESERVE, REWARD_RAN_DRY, REWARD_RETURNED
 from policies.env.core import REWARD_TARGET, SarSearchConfig
 from policies.env.gym_env import SarSearchEnv
 from policies.env.vector import SarSearchVectorEnv
@@ -217,7 +217,7 @@ def test_in_the_arrive_frame_the_constant_action_stops_on_the_target_and_holds_t
     """(1, 0) read in the arrive frame, flown by the environment's multirotor dynamics, reaches a point 300 m away at
     full speed, stops on it without passing it by more than a few metres and then holds over it below the close-look
     speed (what a close look or a landing at home needs). Read in the target frame it keeps overshooting."""
-    from missions.belief_search import CLOSE_LOOK_SPEED_MPS, movement_velocity
+    from missions.search_state_v1 import CLOSE_LOOK_SPEED_MPS, movement_velocity
     from sitl_bridge import dynamics
 
     flight = FlightSettings()

@@ -21,7 +21,7 @@ from test_runner import ALL_STATES, policy, small_mission  # noqa: F401  (policy
 import hrlsac_cli
 from autonomy.vehicle_link import VehicleLink
 from missions.mission_writer import save_mission
-from missions.signing import NEW_STREAM_MAX_AGE, SIGNED_FLAG, KeyFileError, generate_key, load_key_file, write_key_file
+from mavlink_signing import NEW_STREAM_MAX_AGE, SIGNED_FLAG, KeyFileError, generate_key, load_key_file, write_key_file
 from simulation.mission_replay import replay_mission
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.scripted_flight import LockstepPilot, LockstepTimeout

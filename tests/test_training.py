@@ -538,7 +538,7 @@ def test_keep_best_is_the_flat_sacs_and_needs_quick_evaluations():
 def test_random_goals_go_home_from_the_bingo_call_on(tmp_path):
     """In the warm-up and the joint phase's random goals (SarSearch-v1), a search past the bingo call gets
     ReturnToBase, the others their uniform draw, and the draws of the generator are the same either way."""
-    from missions.belief_search import BINGO_RESERVE_S
+    from missions.search_state_v1 import BINGO_RESERVE_S
     from missions.goals import RETURN_TO_BASE
 
     config = small_config("hrl-sac", num_envs=8, meta_joint_goals="random", meta_only_steps=400)
@@ -637,7 +637,7 @@ def test_a_checkpoint_written_before_the_sub_packages_still_resumes(tmp_path):
 
     trainer = Trainer(small_config("hrl-sac"), tmp_path)
     pickled = pickle.dumps(trainer.env.core)
-    old = pickled.replace(b"policies.env.core", b"policies.env_core").replace(b"policies.env.ambiguous",
+    old = pickled.replace(b"policies.env.core", b"policies.env_core").replace(b"policies.env.task_v1",
                                                                               b"policies.ambiguous_env")
     assert old != pickled and b"policies.env_core" in old
     assert pickle.dumps(load_environment(old)) == pickled

@@ -46,7 +46,7 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
             raise CompareError(f"--streams must be >= 1, got {args.streams}")
         scripted = None
         if args.scripted is not None:
-            from policies.env.baselines import BASELINES
+            from policies.env.baselines_v1 import BASELINES
 
             scripted = [name.strip() for name in args.scripted.split(",") if name.strip()]
             unknown = [name for name in scripted if name not in BASELINES]

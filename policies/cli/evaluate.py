@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 
 
 def main(argv: list[str], prog: str = "hrlsac export") -> int:

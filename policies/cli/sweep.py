@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 from simulation.worker_pool import RAY_EXTRA, WorkerPoolError
 
 

@@ -14,7 +14,7 @@ import signal
 import sys
 from pathlib import Path
 
-from missions.cli_help import HelpFormatter
+from hrlsac_cli.help_format import HelpFormatter
 from policies.checkpoint import CHECKPOINT
 
 

@@ -22,10 +22,10 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from missions import search
-from policies.env.baselines import fly_straight
+from policies.env.baselines_v1 import fly_straight
 
 if TYPE_CHECKING:
-    from policies.env.core import SarSearchBatch
+    from policies.env.task_v0 import SarSearchBatch
 
 TRACK_SPACING_FACTOR = 1.8
 PARALLEL_TRACK_SIGMAS = 2.5

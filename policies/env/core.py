@@ -1,23 +1,12 @@
-"""The search-and-rescue environment, stepped for N scenarios at once with numpy.
+"""What both search tasks share, stepped for N scenarios at once with numpy: the configuration, the scenario pool,
+the flown vehicle and the observations (:class:`FlownSearch`), the action box and the reward constants.
 
-This is the one implementation of the environment: :class:`policies.env.gym_env.SarSearchEnv` (gymnasium, N = 1)
-and :class:`policies.env.vector.SarSearchVectorEnv` (N scenarios) both drive a :class:`SarSearchBatch`, so they
-agree exactly for the same seeds. It is built only from the vehicle dynamics (``sitl_bridge.dynamics``), the
-search logic (``missions.search``, ``missions.goals``) and the observation builder (``autonomy.observation``).
-
-One step is one policy decision (``FlightSettings.step_period_s``, 1 s by default):
-
-1. the action (movement north/east in [-1, 1], search intensity and zoom in [0, 1]) becomes a horizontal
-   velocity command of up to ``max_speed_mps``; the drone flies it for one period at the search altitude
-   through the exact multirotor dynamics;
-2. objects drift with current and wind; the camera footprint (altitude, zoom) marks coverage and may detect
-   objects (Bernoulli draws from a counter-based generator keyed by the episode seed, so every environment
-   of a batch has its own reproducible stream);
-3. reward (the paper's table): -0.1 per step, -0.01 * ||a||^2, +100 on reaching the victim, -50 on entering a
-   danger zone, -10 on leaving the geofence. Reaching, collision and leaving end the episode (terminated);
-   the step limit truncates it.
-4. HRL-SAC (goal-conditioned mode): a goal whose point the drone reached is grounded again from the new search
-   state (``missions.goals``), so the low level always has somewhere useful to fly until the next meta decision.
+Each task's core is this frame on its search state: ``policies.env.task_v0.SarSearchBatch`` (SarSearch-v0, the
+paper's task) and ``policies.env.task_v1.AmbiguousSearchBatch`` (SarSearch-v1). The gymnasium environment
+(:class:`policies.env.gym_env.SarSearchEnv`, N = 1) and the vector environment
+(:class:`policies.env.vector.SarSearchVectorEnv`) drive the same cores, so they agree exactly for the same seeds.
+Everything is built only from the vehicle dynamics (``sitl_bridge.dynamics``), the search logic
+(``missions.search``, ``missions.goals``) and the observation builder (``autonomy.observation``).
 """
 from __future__ import annotations
 
@@ -25,13 +14,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.observation import LAYOUT_V3, observe_search
+from autonomy.observation import observe_search
 from missions import search
-from missions.belief_search import TARGET_SLOTS, check_action_frame, movement_velocity
+from missions.search_state_v1 import TARGET_SLOTS, check_action_frame, movement_velocity
 from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
-from missions.search_state import SearchState, splitmix64
+from missions.search_state_v0 import splitmix64
 from missions.shield import shield_velocity
 from missions.validation import check_fields
 from sitl_bridge import dynamics
@@ -92,7 +81,7 @@ class SarSearchConfig:
     max_obstacles: int = 4
     """Danger-zone slots per scenario (a scenario with more is refused)."""
     action_frame: str = "north_east"
-    """How the movement components are read (``missions.belief_search.ACTION_FRAMES``): "north_east" (velocity
+    """How the movement components are read (``missions.search_state_v1.ACTION_FRAMES``): "north_east" (velocity
     north and east, the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to the
     right of that line, so flying straight at the target is the constant action (1, 0)) or "arrive" (as "target",
     slowing on the last step so that (1, 0) also stops on the target)."""
@@ -154,7 +143,7 @@ class ScenarioSource:
 class FlownSearch:
     """What every version's environment adds to its search state: the scenarios it draws, the vehicle dynamics,
     the path flown, the episode return and the observations. A version's batch class inherits this and its
-    search state (``missions.search_state.SearchState`` or ``missions.belief_search.BeliefSearchState``)."""
+    search state (``missions.search_state_v0.SearchState`` or ``missions.search_state_v1.BeliefSearchState``)."""
 
     config: SarSearchConfig
     shielded = False
@@ -256,44 +245,3 @@ class FlownSearch:
     def meta_observation(self) -> np.ndarray:
         """(N, meta_dim): what the meta-controller sees (everything but the goal one-hot)."""
         return self.obs[:, :self.layout.meta_dim]
-
-
-class SarSearchBatch(FlownSearch, SearchState):
-    """SarSearch-v0: N independent search episodes, stepped together: the search state (``missions.search_state``,
-    shared with the flight runtime) plus the vehicle dynamics, the reward and the observations. Arrays are
-    (N, ...); nothing here loops over N except resets, which copy each new episode's cached scenario arrays."""
-
-    layout = LAYOUT_V3
-
-    def __init__(self, config: SarSearchConfig, num_envs: int):
-        SearchState.__init__(self, self._placeholder(config, num_envs), config.flight)
-        self._setup_vehicles(self.layout.dim)
-
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Advance every environment one decision; returns (obs, reward, terminated, truncated, info).
-
-        Finished environments are NOT reset here; the wrappers decide when (gymnasium's auto-reset rules).
-        The info arrays are views of live state, valid until the next call.
-        """
-        flight = self.flight
-        a, position = self.fly(actions)
-        out = self.advance(position, a[:, 2], a[:, 3], flight.step_period_s)
-
-        energy = a[:, ENERGY_COMPONENTS]
-        reward = (REWARD_STEP + REWARD_ENERGY * np.einsum("ij,ij->i", energy, energy) + REWARD_TARGET * out.success
-                  + REWARD_COLLISION * out.collision + REWARD_BOUNDARY * out.out_of_bounds)
-        self.episode_return += reward
-        terminated = out.success | out.collision | out.out_of_bounds
-        truncated = (self.steps >= flight.max_steps) & ~terminated
-        # Views of the live arrays: valid until the next step (the wrappers copy what they hand out).
-        info = {"success": out.success, "collision": out.collision, "out_of_bounds": out.out_of_bounds,
-                "distance_to_victim_m": out.distance_to_victim_m, "coverage_ratio": self.coverage_ratio,
-                "searched_cells": self.searched_cells,
-                "first_detection_step": self.first_detection_step, "victim_detected": self.has_detection,
-                "position": self.position, "goal_point": out.step_goal_point, "goal_reached": out.goal_reached,
-                # A sub-goal is completed when reaching it moves the search on, or on the episode's last step.
-                "goal_completed": out.goal_reached & (out.goal_moved_on | terminated | truncated),
-                "first_detection_chance": out.first_detection_chance,
-                "path_length_m": self.path_length_m, "episode_return": self.episode_return, "steps": self.steps,
-                **self.step_start_info()}
-        return self.observe(), reward.astype(np.float32), terminated, truncated, info

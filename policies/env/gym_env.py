@@ -1,8 +1,9 @@
 """``SarSearch-v0`` and ``SarSearch-v1``: the gymnasium environment (one search episode at a time).
 
-A thin wrapper around :class:`policies.env.core.SarSearchBatch` with N = 1; the vectorised
+A thin wrapper around the task's core (:class:`policies.env.task_v0.SarSearchBatch` or
+:class:`policies.env.task_v1.AmbiguousSearchBatch`) with N = 1; the vectorised
 :class:`policies.env.vector.SarSearchVectorEnv` drives the same core, so both give the same results for the
-same seeds. See ``docs/environment.md`` for the world scale and ``policies/env/core.py`` for the step.
+same seeds. See ``docs/environment.md`` for the world scale and the task modules for the step.
 """
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from missions import search
 from policies.config import TrainConfig
-from policies.env.ambiguous import REWARD_RETURNED
+from policies.env.task_v1 import REWARD_RETURNED
 from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
 
 

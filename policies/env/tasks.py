@@ -1,13 +1,14 @@
-"""The environment core of each task version: ``SarSearch-v0`` (``core.py``, the paper's task) or ``SarSearch-v1``
-(``ambiguous.py``, which builds on it). Kept apart from both so that neither imports the other's dependant."""
+"""The environment core of each task version: ``SarSearch-v0`` (``task_v0.py``, the paper's task) or
+``SarSearch-v1`` (``task_v1.py``). Kept apart from both so that neither imports the other's dependant."""
 from __future__ import annotations
 
 from typing import Sequence
 
 import numpy as np
 
-from policies.env.ambiguous import AmbiguousSearchBatch
-from policies.env.core import SarSearchBatch, SarSearchConfig
+from policies.env.task_v1 import AmbiguousSearchBatch
+from policies.env.core import SarSearchConfig
+from policies.env.task_v0 import SarSearchBatch
 
 
 def batch_class(task: str) -> type:

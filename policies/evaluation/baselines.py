@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from missions.mission import FlightSettings
-from policies.env.baselines import BASELINES, ScriptedSettings
+from policies.env.baselines_v1 import BASELINES, ScriptedSettings
 from policies.env.baselines_v0 import BASELINES_V0
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -12,7 +12,7 @@ def run_baseline(name: str, split: str = "test", episodes: int = 200, flight: Fl
                  stream: int = 0, **environment) -> dict:
     """One episode on each of the first ``episodes`` scenarios of ``split`` (episode seed i -> scenario i), or of
     the scenarios / generator given in ``environment`` (``SarSearchConfig`` fields). ``settings``: SarSearch-v1's
-    scripted knobs (default: the tuned ones, ``policies.env.baselines.TUNED``); ``stream``: the detection stream
+    scripted knobs (default: the tuned ones, ``policies.env.baselines_v1.TUNED``); ``stream``: the detection stream
     (``episode_batch``)."""
     core = episode_batch(split, episodes, flight, goal_conditioned=False, task=task, stream=stream, **environment)
     if task == "SarSearch-v0":
@@ -20,7 +20,7 @@ def run_baseline(name: str, split: str = "test", episodes: int = 200, flight: Fl
     elif name == "random":
         policy = BASELINES[name](core, seed=seed)
     else:
-        from policies.env.baselines import TUNED
+        from policies.env.baselines_v1 import TUNED
 
         policy = BASELINES[name](core, settings or TUNED.get(name, ScriptedSettings()))
     metrics = summarise(run_episodes(core, lambda _core: policy.act()), flight.step_period_s)

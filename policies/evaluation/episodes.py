@@ -15,11 +15,11 @@ import numpy as np
 from autonomy.search_pilot import BINGO_FAILSAFE_S
 from missions.goals import RETURN_TO_BASE
 from missions.mission import FlightSettings
-from policies.env.core import SarSearchBatch, SarSearchConfig
+from policies.env.core import FlownSearch, SarSearchConfig
 from policies.env.tasks import make_batch
 from policies.evaluation.stats import quantiles, wilson_interval
 
-ActFn = Callable[[SarSearchBatch], np.ndarray]
+ActFn = Callable[[FlownSearch], np.ndarray]
 END_KEYS = ("success", "collision", "out_of_bounds", "ran_dry", "returned")
 """How an episode can end (besides the step limit); ran_dry and returned are SarSearch-v1's."""
 FOUND_BY_S = (120, 240, 360, 480, 600, 720)
@@ -27,7 +27,7 @@ FOUND_BY_S = (120, 240, 360, 480, 600, 720)
 GoalFn = Callable[[np.ndarray], np.ndarray]
 
 
-def run_episodes(core: SarSearchBatch, act: ActFn, choose_goals: GoalFn | None = None,
+def run_episodes(core: FlownSearch, act: ActFn, choose_goals: GoalFn | None = None,
                  flight_rules: bool = False) -> dict[str, np.ndarray]:
     """Fly every slot of ``core`` to the end of its current episode; per-episode outcome arrays.
 
@@ -132,7 +132,7 @@ def summarise(record: dict[str, np.ndarray], step_period_s: float = 1.0) -> dict
 
 
 def episode_batch(split: str, episodes: int, flight: FlightSettings, goal_conditioned: bool,
-                  slots: range | None = None, stream: int = 0, **environment) -> SarSearchBatch:
+                  slots: range | None = None, stream: int = 0, **environment) -> FlownSearch:
     """One slot per scenario 0..episodes-1 of ``split`` (or only those in ``slots``, a part of that range:
     scenario i is flown with episode seed i whichever batch it is in, so parts concatenate to the whole).
     ``stream`` k > 0 flies the same scenarios with other detection draws (episode seed i + k * episodes, which

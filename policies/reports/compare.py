@@ -74,7 +74,7 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     SarSearch-v1 runs also get the rows of ``policies.reports.groups`` (scripted searchers over ``streams``
     detection streams, constant goals, IQM, P(found by t)); ``generator`` (a GeneratorConfig) with ``scenarios``
     (the name ``hrlsac evaluate --generator`` gave the eval files) compares on that distribution instead;
-    ``scripted`` names the scripted searchers to fly (default: all of ``policies.env.baselines.BASELINES``).
+    ``scripted`` names the scripted searchers to fly (default: all of ``policies.env.baselines_v1.BASELINES``).
     """
     from policies.env.baselines_v0 import BASELINES_V0
     from policies.reports import groups as compare_groups

@@ -2,7 +2,7 @@
 detection streams, every constant goal under each HRL-SAC run's learned low level, the rliable-style aggregates
 (``policies.evaluation.aggregate``), P(found by t), and the verdicts of HRL-SAC against every other row.
 
-* **scripted searchers** (``policies.env.baselines``, the settings tuned on val): each flies the same scenarios once
+* **scripted searchers** (``policies.env.baselines_v1``, the settings tuned on val): each flies the same scenarios once
   per stream k = 0 .. streams-1 (the same scenarios with other detection draws, ``episode_batch``'s ``stream``):
   its runs, as the seeds are a learned method's;
 * **constant goals**: ``hrlsac evaluate RUN --constant-goal GOAL`` writes ``eval_<split>[_<scenarios>]_goal-<GOAL>
@@ -34,7 +34,7 @@ def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, en
                   progress: TextIO | None, names: Sequence[str] | None = None) -> tuple[list[dict], dict[str, dict]]:
     """Each scripted searcher's row (``names``, default all) over ``streams`` detection streams, and its first
     stream's metrics (figures)."""
-    from policies.env.baselines import BASELINES
+    from policies.env.baselines_v1 import BASELINES
     from policies.evaluation.baselines import run_baseline
 
     rows, first = [], {}

@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from missions.belief_search import BINGO_RESERVE_S
+from missions.search_state_v1 import BINGO_RESERVE_S
 from missions.goals import GOAL_NAMES, RETURN_TO_BASE
 from missions.mission_file import load_mission
 from policies.agents.discrete_sac import DiscreteSAC
