@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from common import summarise, results_file, write_report  # first: it puts this checkout on sys.path
 
 from sitl_bridge import dynamics
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 

@@ -44,7 +44,7 @@ FAILSAFE_TEXT = re.compile(r"^(Failsafe: |GCS Failsafe(?! Cleared)|Battery Fails
 line; over MAVLink PX4 says only "Failsafe activated"), ArduPilot's "GCS Failsafe", "Battery Failsafe" (not the
 "GCS Failsafe Cleared" that ends one) and "Circle fence breached"."""
 FALLBACK_CLEARED = "Offboard setpoints back"
-"""The PX4 personality's log line when its offboard-loss fallback clears (sitl_bridge.autopilot)."""
+"""The PX4 personality's log line when its offboard-loss fallback clears (sitl_bridge.px4.autopilot)."""
 STOPPED_MPS = 0.5
 
 

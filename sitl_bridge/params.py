@@ -3,7 +3,7 @@
 PX4 sends integer parameters "bytewise": the int32's four bytes are put in PARAM_VALUE.param_value
 (a float field) unchanged, and it announces MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE in
 AUTOPILOT_VERSION. We do the same so that clients written for PX4 decode our integers correctly.
-ArduPilot sends every parameter as its float value (its table is in :mod:`sitl_bridge.ardupilot_params`);
+ArduPilot sends every parameter as its float value (its table is in :mod:`sitl_bridge.ardupilot.params`);
 which encoding a vehicle uses is its autopilot's ``PARAMS_BYTEWISE``.
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ class ParamSpec:
 PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MIS_TAKEOFF_ALT", REAL32, 2.5, 0.0, 500.0,
               "takeoff altitude above home when NAV_TAKEOFF param7 is NaN (m)"),
-    # Mission mode (navigator_params.c, mission_params.c; sitl_bridge.px4_mission)
+    # Mission mode (navigator_params.c, mission_params.c; sitl_bridge.px4.mission)
     ParamSpec("NAV_ACC_RAD", REAL32, 10.0, 0.05, 200.0,
               "mission: horizontal acceptance radius of a waypoint whose param2 does not set one (m)"),
     ParamSpec("NAV_MC_ALT_RAD", REAL32, 0.8, 0.05, 200.0, "mission: vertical acceptance radius of a waypoint (m)"),

@@ -18,9 +18,9 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
 VELOCITY_ONLY = 3527  # SET_POSITION_TARGET_LOCAL_NED type_mask: use vx, vy, vz only

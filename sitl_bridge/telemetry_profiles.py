@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_params import STREAM_GROUPS, STREAM_LINKS
+from sitl_bridge.ardupilot.params import STREAM_GROUPS, STREAM_LINKS
 from sitl_bridge.params import ParameterStore
 
 HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT

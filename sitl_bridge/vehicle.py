@@ -4,7 +4,7 @@ One :meth:`SimulatedVehicle.step` is one physics tick: read what the clients sen
 pick a velocity command, advance the dynamics and sensors, then send the telemetry that is due. The
 same method runs in lockstep (the caller steps) and in real time (:mod:`sitl_bridge.server` paces it).
 
-The autopilot is PX4 (:class:`sitl_bridge.autopilot.Autopilot`) or ArduPilot Copter
+The autopilot is PX4 (:class:`sitl_bridge.px4.autopilot.Px4Autopilot`) or ArduPilot Copter
 (:class:`sitl_bridge.ardupilot.ArduCopter`), chosen by ``VehicleConfig.autopilot``; both share everything else.
 Realism options: the autopilot may have booted long before the simulation starts (``boot_time_s``) and may reboot
 mid-flight (``reboot_at_s``): the links go silent, the motors stop (an airborne vehicle falls), and the autopilot
@@ -21,14 +21,14 @@ from pymavlink.dialects.v20 import common as mavlink
 from missions.geodesy import GeoPoint, LocalFrame
 from mavlink_signing import LinkSigning, simulated_timestamp
 from sitl_bridge import dynamics, telemetry
-from sitl_bridge.ardupilot import ArduCopter
-from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
-from sitl_bridge.ardupilot_params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
-from sitl_bridge.autopilot import Autopilot
+from sitl_bridge.ardupilot.autopilot import ArduCopter
+from sitl_bridge.ardupilot.mission_protocol import CopterMissionTransfer
+from sitl_bridge.ardupilot.params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
+from sitl_bridge.px4.autopilot import Px4Autopilot
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
 from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.link import Link
-from sitl_bridge.mission_protocol import MissionTransfer
+from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.params import ParameterStore
 from sitl_bridge.sensors import SensorSuite
 from sitl_bridge.signing import vehicle_signing
@@ -43,7 +43,7 @@ def make_autopilot(config: VehicleConfig, params: ParameterStore, frame: LocalFr
     """A freshly booted autopilot of the configured personality, in the simulator's NED ``frame``."""
     if config.autopilot == "ardupilot":
         return ArduCopter(params, config.airframe, frame)
-    return Autopilot(params, config.airframe, frame)
+    return Px4Autopilot(params, config.airframe, frame)
 
 
 def make_params(config: VehicleConfig) -> ParameterStore:
@@ -262,7 +262,7 @@ class SimulatedVehicle(MessageHandlers):
             self.home = self.config.home
         else:
             self.home = GeoPoint(*self.frame.to_geodetic(*home_ned))
-        if isinstance(self.autopilot, Autopilot):
+        if isinstance(self.autopilot, Px4Autopilot):
             self.autopilot.home_alt_m = self.home.alt_m  # PX4's NAV_TAKEOFF altitude is AMSL, so home's matters
         self.broadcast(telemetry.home_position(self))
 

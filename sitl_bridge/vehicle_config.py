@@ -36,7 +36,7 @@ class VehicleConfig:
     """GPS, barometer and attitude noise."""
     params: dict[str, float] = field(default_factory=dict)
     """Parameter overrides by name, of the chosen autopilot (PX4: sitl_bridge.params.PARAM_SPECS, ArduPilot:
-    sitl_bridge.ardupilot_params.ARDUPILOT_PARAM_SPECS)."""
+    sitl_bridge.ardupilot.params.ARDUPILOT_PARAM_SPECS)."""
     telemetry_rates_hz: dict[int, float] = field(default_factory=dict)
     """Overrides of the profile's stream rates by message id, on every link (0 disables a stream)."""
     signing_key: bytes | None = field(default=None, repr=False)

@@ -14,9 +14,9 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_bridge import telemetry
 from mavlink_signing import LinkSigning
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
-from sitl_bridge.ardupilot_mission_protocol import CopterMissionTransfer
+from sitl_bridge.ardupilot.mission_protocol import CopterMissionTransfer
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
-from sitl_bridge.mission_protocol import MissionTransfer
+from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.multirotor import VehicleState
 from sitl_bridge.params import ParameterStore, decode_bytewise, decode_float, encode_bytewise
 from sitl_bridge.signing import requested_key
@@ -70,14 +70,14 @@ class MessageHandlers:
         if self.is_ardupilot:  # PX4 implements neither REQUEST_DATA_STREAM nor guided-mode mission items
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
             table["MISSION_ITEM_INT"] = table["MISSION_ITEM"] = self._on_mission_item
-        if self.copter_missions is not None:  # ArduPilot's mission protocol (sitl_bridge.ardupilot_mission_protocol)
+        if self.copter_missions is not None:  # ArduPilot's mission protocol (sitl_bridge.ardupilot.mission_protocol)
             c = self.copter_missions
             for name, method in (("MISSION_COUNT", c.on_count), ("MISSION_REQUEST_INT", c.on_request),
                                  ("MISSION_REQUEST", c.on_request), ("MISSION_ACK", c.on_ack),
                                  ("MISSION_REQUEST_LIST", c.on_request_list), ("MISSION_CLEAR_ALL", c.on_clear_all),
                                  ("MISSION_SET_CURRENT", c.on_set_current)):
                 table[name] = self._mission_handler(method, (AUTOPILOT_COMPONENT,))
-        elif self.missions is not None:  # PX4: the mission protocol (sitl_bridge.mission_protocol)
+        elif self.missions is not None:  # PX4: the mission protocol (sitl_bridge.px4.mission_protocol)
             m = self.missions
             for name, method in (("MISSION_COUNT", m.on_count), ("MISSION_ITEM_INT", m.on_item),
                                  ("MISSION_ITEM", m.on_item), ("MISSION_REQUEST_INT", m.on_request),

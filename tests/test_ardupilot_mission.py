@@ -1,6 +1,6 @@
 """ArduCopter's mission protocol and AUTO mode, over the in-memory link with a pymavlink client in lockstep.
 
-What ArduPilot does is in sitl_bridge/ardupilot_mission_protocol.py and sitl_bridge/ardupilot_auto.py (docs/sitl.md,
+What ArduPilot does is in sitl_bridge/ardupilot/mission_protocol.py and sitl_bridge/ardupilot/auto.py (docs/sitl.md,
 "ArduPilot missions"): item 0 is home, uploads are answered with MISSION_REQUEST, a second a request, 8 s to give
 up; AUTO is not armable, needs a takeoff first when armed on the ground, takes off on MISSION_START, announces each
 command, holds at the end in the air, and disarms after a LAND.
@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_ardupilot_vehicle import ACCEPTED, ARM, FAILED, airborne, copter, texts
 from test_px4_mission import upload  # the same client side: answer each request until the MISSION_ACK
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.scripted_flight import LockstepPilot
 
 RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

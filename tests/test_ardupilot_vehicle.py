@@ -12,7 +12,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import VehicleConfig
 

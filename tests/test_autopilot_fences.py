@@ -1,4 +1,4 @@
-"""The autopilots' own geofences (sitl_bridge/fences.py), flown in lockstep with pymavlink: PX4's GF_* cylinder and
+"""The autopilots' own geofences (sitl_bridge/px4/geofence.py and sitl_bridge/ardupilot/fence.py), flown in lockstep with pymavlink: PX4's GF_* cylinder and
 ArduCopter's FENCE_* circle, ceiling and floor, their actions, texts and pre-arm refusals."""
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_ardupilot_vehicle import airborne
 
 from autonomy.vehicle_link import VehicleLink
-from sitl_bridge.ardupilot_modes import CopterMode
-from sitl_bridge.fences import fence_names
+from sitl_bridge.ardupilot.modes import CopterMode
+from sitl_bridge.ardupilot.fence import fence_names
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 

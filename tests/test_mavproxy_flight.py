@@ -21,8 +21,8 @@ import pytest
 
 pytest.importorskip("MAVProxy")
 
-from sitl_bridge.ardupilot_modes import CopterMode  # noqa: E402
-from sitl_bridge.px4_modes import FlightMode  # noqa: E402
+from sitl_bridge.ardupilot.modes import CopterMode  # noqa: E402
+from sitl_bridge.px4.modes import FlightMode  # noqa: E402
 from sitl_bridge.server import UdpPorts, VehicleServer  # noqa: E402
 from sitl_bridge.vehicle import VehicleConfig  # noqa: E402
 

@@ -338,7 +338,7 @@ async def fly_orbit_example(port: int, server: VehicleServer) -> tuple[list[tupl
 
 
 def test_mavsdk_do_orbit_example_circles_its_centre_facing_it(udp_ports):
-    # MAVSDK's do_orbit is PX4's Orbit mode (MAV_CMD_DO_ORBIT, sitl_bridge/px4_orbit.py, docs/sitl.md).
+    # MAVSDK's do_orbit is PX4's Orbit mode (MAV_CMD_DO_ORBIT, sitl_bridge/px4/orbit.py, docs/sitl.md).
     server, mavsdk_port = vehicle_server(udp_ports, 13)
     with server:
         samples, orbit_height = asyncio.run(asyncio.wait_for(fly_orbit_example(mavsdk_port, server), 120))
@@ -462,7 +462,7 @@ def test_the_runners_mavsdk_link_hears_the_autopilots_status_texts(udp_ports):
     with server:
         link = MavsdkLink(f"udpin:0.0.0.0:{mavsdk_port}", time.monotonic)
         try:
-            text = "Geofence: exceeding maximum distance to Home"  # PX4's health check text (sitl_bridge.fences)
+            text = "Geofence: exceeding maximum distance to Home"  # PX4's health check text (sitl_bridge.px4.geofence)
             deadline = time.monotonic() + T
             while text not in [t for _, t in link.status_since(0)] and time.monotonic() < deadline:
                 server.vehicle.autopilot._event(server.vehicle.time_s, text, 2)  # again until MAVSDK has subscribed

@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 from sitl_bridge.wind import Wind

@@ -1,4 +1,4 @@
-"""The simulated PX4's failsafe reaction (sitl_bridge/px4_failsafes.py), flown in lockstep with pymavlink: COM_FAIL_ACT_T's
+"""The simulated PX4's failsafe reaction (sitl_bridge/px4/failsafes.py), flown in lockstep with pymavlink: COM_FAIL_ACT_T's
 Hold before a geofence or battery Return / Land, a mode switch during it as a user takeover, and the battery failsafe
 with COM_LOW_BAT_ACT (PX4's default only warns), each with the STATUSTEXTs PX4 sends."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 from test_autopilot_fences import LOCAL_NED, PX4_DISTANCE_TEXT, fly, px4_in_offboard, texts
 
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 
 HOLD_TEXT = "Failsafe activated, entering Hold for 5 seconds\t"

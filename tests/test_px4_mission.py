@@ -1,10 +1,10 @@
 """PX4's mission protocol, Mission mode and uploaded fences, over the in-memory link with a pymavlink client in lockstep.
 
-What PX4 does is in sitl_bridge/mission_protocol.py and sitl_bridge/px4_mission.py (docs/sitl.md, "PX4 missions",
+What PX4 does is in sitl_bridge/px4/mission_protocol.py and sitl_bridge/px4/mission.py (docs/sitl.md, "PX4 missions",
 has the source lines): the upload handshake and its retries, the download, clear and set-current, the feasibility
 check (a mission outside the geofence is stored but cannot be started), the climb PX4 inserts before the first
 waypoint, hold times, the landing item, pausing and resuming, and the restart after a finished mission; a fence
-uploaded as the FENCE type (sitl_bridge/fences.py): its areas, the breach, and missions checked against it.
+uploaded as the FENCE type (sitl_bridge/px4/geofence.py): its areas, the breach, and missions checked against it.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_autopilot_fences import texts
 from test_vehicle_commands import pilot  # noqa: F401  (the fixture: a lockstep vehicle with a GPS fix)
 
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED

@@ -9,7 +9,7 @@ import pytest
 from conftest import UdpClient
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.vehicle import VehicleConfig
 

@@ -8,7 +8,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint, LocalFrame
 from sitl_bridge import telemetry
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import VehicleConfig
 from sitl_bridge.wind import Wind

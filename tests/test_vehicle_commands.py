@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from test_autopilot_fences import texts
 
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import VehicleConfig
 
@@ -314,7 +314,7 @@ def test_flight_status_is_the_neutral_view_of_px4_modes(pilot):
     assert autopilot.status.phase == "landing"
 
 
-# ---------------------------------------------------------------- Orbit (MAV_CMD_DO_ORBIT, sitl_bridge/px4_orbit.py)
+# ---------------------------------------------------------------- Orbit (MAV_CMD_DO_ORBIT, sitl_bridge/px4/orbit.py)
 ORBIT = mavlink.MAV_CMD_DO_ORBIT
 
 

@@ -10,9 +10,9 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import GeoPoint
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 

@@ -12,7 +12,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.autopilot_base import battery_voltage_v, consumed_mah
 from sitl_bridge.multirotor import VehicleState
 

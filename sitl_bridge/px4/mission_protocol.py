@@ -8,7 +8,7 @@ missions", has the line references and what differs from v1.14):
   the stored one. A count of 0 clears the mission. An item with the wrong seq is ignored (the retry asks again);
   an item whose frame or command is not supported aborts the transfer with that MAV_MISSION_RESULT; 5 s without
   a message ends it with "Operation timeout" and no ACK. The upload is accepted whatever the mission asks (a
-  mission the navigator then finds infeasible is stored but invalid: ``sitl_bridge.px4_mission``), also in flight.
+  mission the navigator then finds infeasible is stored but invalid: ``sitl_bridge.px4.mission``), also in flight.
 * **download**: MISSION_REQUEST_LIST gives MISSION_COUNT, each MISSION_REQUEST_INT (MISSION_REQUEST) the item as
   MISSION_ITEM_INT (MISSION_ITEM); the client's MISSION_ACK ends it. Positional items come back in a GLOBAL frame
   (relative altitude or not, as uploaded), the others in MAV_FRAME_MISSION.
@@ -17,7 +17,7 @@ missions", has the line references and what differs from v1.14):
   when a client answers a request with MISSION_ACK UNSUPPORTED.
 
 The MISSION and FENCE types are stored (a fence: polygon vertices and circles, inclusion or exclusion, at most 64
-items; a polygon of fewer than 3 vertices is an ERROR; ``sitl_bridge.fences`` flies it); a rally upload gets
+items; a polygon of fewer than 3 vertices is an ERROR; ``sitl_bridge.px4.geofence`` flies it); a rally upload gets
 MAV_MISSION_UNSUPPORTED and its download lists nothing.
 """
 from __future__ import annotations
@@ -29,20 +29,20 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.endpoint import Endpoint
+from sitl_bridge.mission_items import (
+    ABSOLUTE_FRAMES, FENCE, MISSION, RELATIVE_FRAMES, MissionItem, item_message,
+)
 
 RETRY_S = 0.25  # MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: re-request an item after this long without it
 TIMEOUT_S = 5.0  # MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a transfer silent this long is abandoned
 MAX_ITEMS = 500  # CONFIG_NUM_MISSION_ITMES_SUPPORTED's default (PX4 SITL builds allow 10,000)
 
-MISSION, FENCE = mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENCE
 CAPACITY = {MISSION: MAX_ITEMS, FENCE: 64}  # DM_KEY_FENCE_POINTS_MAX
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 
-ABSOLUTE_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
-RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 INT_ONLY_FRAMES = (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 
-# Commands flown by sitl_bridge.px4_mission. PX4 accepts more (LOITER_TO_ALT, ROI, VTOL, gates, DO_JUMP, ...);
+# Commands flown by sitl_bridge.px4.mission. PX4 accepts more (LOITER_TO_ALT, ROI, VTOL, gates, DO_JUMP, ...);
 # those are refused here with MAV_MISSION_UNSUPPORTED rather than stored and skipped.
 POSITION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
                      mavlink.MAV_CMD_NAV_LOITER_TIME, mavlink.MAV_CMD_NAV_LOITER_UNLIM)
@@ -60,23 +60,6 @@ PAYLOAD_COMMANDS = (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_IMAGE_S
                     mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST, mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
                     mavlink.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE, mavlink.MAV_CMD_DO_MOUNT_CONTROL,
                     mavlink.MAV_CMD_DO_MOUNT_CONFIGURE)
-
-
-@dataclass(frozen=True)
-class MissionItem:
-    """One stored mission item: its command, param1-4, and a position (degrees, metres) or param5-7."""
-
-    command: int
-    params: tuple[float, float, float, float]
-    x: float
-    """Latitude (degrees) for a positional item, else param5."""
-    y: float
-    """Longitude (degrees) for a positional item, else param6."""
-    z: float
-    """Altitude (m: above home when ``relative``, else above mean sea level) or param7."""
-    positional: bool
-    relative: bool = False
-    autocontinue: bool = True
 
 
 def parse_item(msg: mavlink.MAVLink_message, mission_type: int = MISSION) -> MissionItem | int:
@@ -107,27 +90,6 @@ def parse_item(msg: mavlink.MAVLink_message, mission_type: int = MISSION) -> Mis
         return MissionItem(msg.command, params, float(msg.x), float(msg.y), msg.z, positional=False,
                            autocontinue=bool(msg.autocontinue))
     return mavlink.MAV_MISSION_UNSUPPORTED_FRAME
-
-
-def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, int], as_int: bool,
-                 mission_type: int = MISSION) -> mavlink.MAVLink_message:
-    """The item as PX4's format_mavlink_mission_item sends it in a download."""
-    if item.positional:
-        frame = RELATIVE_FRAMES[as_int] if item.relative else ABSOLUTE_FRAMES[as_int]
-    else:
-        frame = mavlink.MAV_FRAME_MISSION
-    x, y = item.x, item.y
-    if as_int:
-        x, y = (_int32(x * 1e7), _int32(y * 1e7)) if item.positional else (_int32(x), _int32(y))
-        return mavlink.MAVLink_mission_item_int_message(*target, seq, frame, item.command, int(current),
-                                                        int(item.autocontinue), *item.params, x, y, item.z, mission_type)
-    return mavlink.MAVLink_mission_item_message(*target, seq, frame, item.command, int(current),
-                                                int(item.autocontinue), *item.params, x, y, item.z, mission_type)
-
-
-def _int32(value: float) -> int:
-    """A float as MISSION_ITEM_INT's int32 x / y (a float item's NaN or huge param5/6 cannot go out as one)."""
-    return int(round(min(max(value, -2.0**31), 2.0**31 - 1))) if math.isfinite(value) else 0
 
 
 @dataclass

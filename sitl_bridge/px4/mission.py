@@ -1,6 +1,6 @@
 """PX4's Mission mode (AUTO.MISSION) for a multirotor: the feasibility check, and flying the items one by one.
 
-A mixin of :class:`sitl_bridge.autopilot.Autopilot`. Read in PX4-Autopilot main at 02e73e3 (docs/sitl.md, "PX4
+A mixin of :class:`sitl_bridge.px4.autopilot.Px4Autopilot`. Read in PX4-Autopilot main at 02e73e3 (docs/sitl.md, "PX4
 missions", has the line references):
 
 * **feasibility** (``navigator/MissionFeasibility/FeasibilityChecker.cpp``, ``mission_feasibility_checker.cpp``):
@@ -28,9 +28,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.autopilot_base import ACCEPTED, DENIED, TEMPORARILY_REJECTED
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.mission_protocol import MissionItem
+from sitl_bridge.mission_items import MissionItem
 from sitl_bridge.multirotor import VehicleState, VelocityCommand
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 
 ACTIVE_MODES = (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.LAND)  # update_mission_state's "active"
 HELD_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_LOITER_TIME)  # param1 is a hold time

@@ -14,9 +14,9 @@ ArduPilot's source, read through the search tools (docs/sitl.md, "ArduPilot Copt
   velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it. MAV_CMD_DO_REPOSITION
   (COMMAND_INT only; MAVSDK's goto_location) sets a GUIDED position target, switching to GUIDED with its flag.
 * RTL climbs (RTL_ALT, cone slope), returns, hovers RTL_LOIT_TIME, lands; LAND and RTL disarm once landed, other
-  modes DISARM_DELAY after landing. AUTO flies the uploaded mission (:mod:`sitl_bridge.ardupilot_auto`; the
-  protocol: :mod:`sitl_bridge.ardupilot_mission_protocol`). Failsafes: :mod:`sitl_bridge.ardupilot_failsafes`; the modes' velocity
-  commands: :mod:`sitl_bridge.ardupilot_guidance`.
+  modes DISARM_DELAY after landing. AUTO flies the uploaded mission (:mod:`sitl_bridge.ardupilot.auto`; the
+  protocol: :mod:`sitl_bridge.ardupilot.mission_protocol`). Failsafes: :mod:`sitl_bridge.ardupilot.failsafes`; the modes' velocity
+  commands: :mod:`sitl_bridge.ardupilot.guidance`.
 
 ``autopilot.mode`` is a :class:`CopterMode`; ``autopilot.status`` is the personality-neutral view
 (:class:`sitl_bridge.autopilot_base.FlightStatus`).
@@ -28,16 +28,16 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from missions.geodesy import LocalFrame
-from sitl_bridge.ardupilot_auto import CopterAuto
-from sitl_bridge.ardupilot_failsafes import CopterFailsafes
-from sitl_bridge.ardupilot_guidance import CopterGuidance
-from sitl_bridge.ardupilot_modes import OTHER_COPTER_MODES, CopterMode, base_mode
-from sitl_bridge.ardupilot_targets import GuidedTargets
+from sitl_bridge.ardupilot.auto import CopterAuto
+from sitl_bridge.ardupilot.failsafes import CopterFailsafes
+from sitl_bridge.ardupilot.guidance import CopterGuidance
+from sitl_bridge.ardupilot.modes import OTHER_COPTER_MODES, CopterMode, base_mode
+from sitl_bridge.ardupilot.targets import GuidedTargets
 from sitl_bridge.autopilot_base import (
     ABOVE_HOME_FRAMES, ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int,
     battery_voltage_v)
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.fences import CopterFence
+from sitl_bridge.ardupilot.fence import CopterFence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 

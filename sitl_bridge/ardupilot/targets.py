@@ -10,7 +10,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.autopilot_base import (
     ABOVE_HOME_FRAMES, AMSL_FRAMES, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
     MASK_YAW_RATE, TERRAIN_FRAMES, Setpoint, body_to_ned)

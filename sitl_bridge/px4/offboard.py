@@ -1,6 +1,6 @@
 """How PX4 takes offboard setpoints (SET_POSITION_TARGET_LOCAL_NED): which frames and type masks, the clamps.
 
-A mixin of :class:`sitl_bridge.autopilot.Autopilot` (it uses the autopilot's params and stores ``setpoint``);
+A mixin of :class:`sitl_bridge.px4.autopilot.Px4Autopilot` (it uses the autopilot's params and stores ``setpoint``);
 docs/sitl.md ("Offboard, as PX4 does it") lists the rules.
 """
 from __future__ import annotations

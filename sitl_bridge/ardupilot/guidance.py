@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.autopilot_base import ARRIVED_RADIUS_M
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.multirotor import VehicleState, VelocityCommand

@@ -1,7 +1,7 @@
 """PX4-flavoured autopilot logic: arming, modes, commands, offboard rules and failsafes.
 
 No I/O and no MAVLink encoding here: the vehicle hands decoded commands and setpoints in, and asks
-:meth:`Autopilot.guidance` for the velocity command the dynamics should fly this tick. What PX4 does and
+:meth:`Px4Autopilot.guidance` for the velocity command the dynamics should fly this tick. What PX4 does and
 why we copy it is noted where it matters; ``docs/sitl.md`` lists the differences and the PX4 sources checked.
 """
 from __future__ import annotations
@@ -16,17 +16,17 @@ from sitl_bridge.autopilot_base import (
     ACCEPTED, ARRIVED_RADIUS_M, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, AutopilotBase, AutopilotEvent,
     FlightStatus, Setpoint, as_int)
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.fences import Px4Geofence
+from sitl_bridge.px4.geofence import Px4Geofence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
-from sitl_bridge.px4_failsafes import (
+from sitl_bridge.px4.failsafes import (
     BATTERY_TEXTS, CRITICAL, EMERGENCY, NONE, Px4Failsafes, battery_warning_level)
-from sitl_bridge.px4_mission import Px4MissionMode
-from sitl_bridge.px4_modes import FlightMode, base_mode
-from sitl_bridge.px4_offboard import OffboardSetpoints
-from sitl_bridge.px4_orbit import Orbit
+from sitl_bridge.px4.mission import Px4MissionMode
+from sitl_bridge.px4.modes import FlightMode, base_mode
+from sitl_bridge.px4.offboard import OffboardSetpoints
+from sitl_bridge.px4.orbit import Orbit
 
-__all__ = ["ACCEPTED", "DENIED", "FAILED", "TEMPORARILY_REJECTED", "UNSUPPORTED", "Autopilot", "AutopilotEvent",
+__all__ = ["ACCEPTED", "DENIED", "FAILED", "TEMPORARILY_REJECTED", "UNSUPPORTED", "Px4Autopilot", "AutopilotEvent",
            "Setpoint", "as_int"]
 
 FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: arm/disarm without checks
@@ -53,7 +53,7 @@ PHASE_OF_MODE = {FlightMode.OFFBOARD: "guided", FlightMode.HOLD: "holding", Flig
                  FlightMode.LAND: "landing", FlightMode.MISSION: "mission"}
 
 
-class Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, AutopilotBase):
+class Px4Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, AutopilotBase):
     """Modes, arming and command handling of one simulated PX4 multirotor."""
 
     PARAMS_BYTEWISE = True
@@ -299,7 +299,7 @@ class Autopilot(OffboardSetpoints, Px4MissionMode, Px4Geofence, Px4Failsafes, Au
 
     def _orbit(self, p: tuple[float, ...], frame: int | None, now: float, state: VehicleState) -> int:
         """MAV_CMD_DO_ORBIT as PX4 splits it: Commander switches to Orbit (a position is needed), FlightTaskOrbit
-        takes the parameters while flying (sitl_bridge.px4_orbit); out of range radius: the failsafe task holds."""
+        takes the parameters while flying (sitl_bridge.px4.orbit); out of range radius: the failsafe task holds."""
         result, place, take = self._place_command(FlightMode.ORBIT, p, frame, now, state, "DO_ORBIT")
         if not take or self.orbit is None:
             return result

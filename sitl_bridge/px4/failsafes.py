@@ -1,4 +1,4 @@
-"""PX4's failsafe reaction and its battery failsafe, as the simulated PX4 runs them (a mixin of ``Autopilot``).
+"""PX4's failsafe reaction and its battery failsafe, as the simulated PX4 runs them (a mixin of ``Px4Autopilot``).
 
 Read in PX4/PX4-Autopilot, ``src/modules/commander``:
 
@@ -23,7 +23,7 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.multirotor import VehicleState
-from sitl_bridge.px4_modes import FlightMode
+from sitl_bridge.px4.modes import FlightMode
 
 NONE, LOW, CRITICAL, EMERGENCY = 0, 1, 2, 3  # battery_status_s::WARNING_*
 BATTERY_TEXTS = {LOW: ("Low battery\t", mavlink.MAV_SEVERITY_CRITICAL),

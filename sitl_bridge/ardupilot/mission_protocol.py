@@ -27,16 +27,16 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_targets import LOCATION_ALT_MAX_M
+from sitl_bridge.ardupilot.targets import LOCATION_ALT_MAX_M
 from sitl_bridge.endpoint import Endpoint
-from sitl_bridge.mission_protocol import ABSOLUTE_FRAMES, RELATIVE_FRAMES, MissionItem, item_message
+from sitl_bridge.mission_items import ABSOLUTE_FRAMES, MISSION, RELATIVE_FRAMES, MissionItem, item_message
 
 RETRY_S = 1.0  # MissionItemProtocol::update: the request again after a second without the item
 TIMEOUT_S = 8.0  # upload_timeout_ms
 MAX_ITEMS = 650  # (storage - 4) / 15 in SITL's mission storage areas, home included
-MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
-# The commands the AUTO mode here flies (sitl_bridge.ardupilot_auto); ArduCopter takes many more
+# The commands the AUTO mode here flies (sitl_bridge.ardupilot.auto); ArduCopter takes many more
 LOCATION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
                      mavlink.MAV_CMD_NAV_LOITER_TIME, mavlink.MAV_CMD_NAV_LOITER_UNLIM)
 OTHER_COMMANDS = (mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_CHANGE_SPEED)

@@ -27,9 +27,9 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge.ardupilot_modes import CopterMode
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.mission_protocol import MissionItem
+from sitl_bridge.mission_items import MissionItem
 from sitl_bridge.multirotor import HOVER, VehicleState, VelocityCommand
 
 NAMES = {mavlink.MAV_CMD_NAV_WAYPOINT: "WP", mavlink.MAV_CMD_NAV_TAKEOFF: "Takeoff", mavlink.MAV_CMD_NAV_LAND: "Land",
