@@ -54,36 +54,6 @@ class TelemetrySource(Protocol):
     def time_since_boot_s(self) -> float: ...
 
 
-class TelemetrySchedule:
-    """Per-link message intervals and the next time each message is due (on a fixed grid)."""
-
-    def __init__(self, rates_hz: dict[int, float]):
-        self.interval_s: dict[int, float] = {}
-        self.next_due_s: dict[int, float] = {}
-        for msg_id, rate in rates_hz.items():
-            self.set_interval(msg_id, 1.0 / rate if rate > 0 else None, now=0.0)
-
-    def set_interval(self, msg_id: int, interval_s: float | None, now: float) -> None:
-        """Stream ``msg_id`` every ``interval_s`` from ``now`` on; None stops it."""
-        if interval_s is None:
-            self.interval_s.pop(msg_id, None)
-            self.next_due_s.pop(msg_id, None)
-        else:
-            self.interval_s[msg_id] = interval_s
-            self.next_due_s[msg_id] = now
-
-    def due(self, now: float) -> list[int]:
-        """Messages due at ``now``; advances their deadlines by one interval (or resyncs if far behind)."""
-        due = []
-        for msg_id, deadline in self.next_due_s.items():
-            if deadline <= now + 1e-9:
-                due.append(msg_id)
-                interval = self.interval_s[msg_id]
-                deadline += interval
-                self.next_due_s[msg_id] = deadline if deadline > now else now + interval
-        return due
-
-
 class MissionReports:
     """MISSION_CURRENT and MISSION_ITEM_REACHED as mavlink_mission.cpp's send() paces them: MISSION_CURRENT at once
     when the current item changes and at 1 Hz, MISSION_ITEM_REACHED for each item reached and the last one again at 1 Hz,
