@@ -1,7 +1,7 @@
 """What the simulated autopilot personalities (PX4, ArduPilot Copter) share.
 
-Each personality (:class:`sitl_bridge.px4.autopilot.Px4Autopilot` for PX4, :class:`sitl_bridge.ardupilot.ArduCopter`) is a
-subclass of :class:`AutopilotBase`. The vehicle talks to both through the same methods: ``handle_command``,
+Each personality (:class:`sitl_bridge.px4.autopilot.Px4Autopilot` for PX4,
+:class:`sitl_bridge.ardupilot.autopilot.ArduCopter`) is a subclass of :class:`AutopilotBase`. The vehicle talks to both through the same methods: ``handle_command``,
 ``handle_setpoint``, ``handle_set_mode_message``, ``on_heartbeat``, ``guidance``, ``landed_state``,
 ``prearm_failure``, ``heartbeat_fields`` and ``battery_charge_state``. No I/O and no MAVLink encoding happens here.
 

@@ -11,7 +11,7 @@ from hrlsac_cli.help_format import HelpFormatter
 from missions.geodesy import GeoPoint
 from mavlink_signing import load_key_file
 from sitl_bridge.ardupilot.params import STREAM_GROUPS, STREAM_LINKS
-from sitl_bridge.px4.autopilot import AutopilotEvent
+from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile

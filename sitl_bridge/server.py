@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from mavlink_signing import wall_timestamp
-from sitl_bridge.px4.autopilot import AutopilotEvent
+from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.clock import PacedClock
 from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now
 from sitl_bridge.link import TcpServerLink, UdpLink

@@ -13,10 +13,19 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("hrlsac_cli", "mavlink_signing", "missions", "sitl_bridge", "autonomy", "simulation", "policies")
 
 
+SPLIT_PACKAGES = {"policies": None, "sitl_bridge": {"px4", "ardupilot"}}
+"""Packages whose parts have rows of their own: every part of ``policies``; the two autopilot personalities of
+``sitl_bridge`` (its other modules are its shared core)."""
+
+
 def unit_of(module: str) -> str:
-    """The row of the table a module belongs to: a top-level package, or a part of ``policies``."""
+    """The row of the table a module belongs to: a top-level package, or a part of a split package."""
     parts = module.split(".")
-    return ".".join(parts[:2]) if parts[0] == "policies" and len(parts) > 1 else parts[0]
+    if parts[0] in SPLIT_PACKAGES and len(parts) > 1:
+        parts_with_rows = SPLIT_PACKAGES[parts[0]]
+        if parts_with_rows is None or parts[1] in parts_with_rows:
+            return ".".join(parts[:2])
+    return parts[0]
 
 
 def allowed_imports() -> dict[str, set[str]]:
