@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test venv clean
+.PHONY: demo test lint venv clean
 
 venv: $(STAMP)
 
@@ -22,13 +22,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/hrlsac mission replay missions/library/demo.yaml --policy policies/pretrained/hrl-sac.pt
 
-# One worker per core plus one (at most 4), whole test files per worker so that module fixtures are built once.
-# About a third of the suite waits on real time (UDP flights at 1x, subprocesses starting), and the extra worker
-# fills that: from a fresh clone on a 2-core AMD EPYC, 2026-12-06, 9 min 43 s with 3 workers against 13 min 57 s
-# with 2.
+# One worker per core plus one (at most 4), whole test files per worker so that module fixtures are built once:
+# part of the suite waits on real time (UDP flights at 1x, subprocesses starting), and the extra worker fills that.
 WORKERS := $(shell $(PYTHON) -c "import os; print(min(4, (os.cpu_count() or 1) + 1))")
-test: $(STAMP)
+test: lint
 	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
 
 clean:
 	rm -rf $(VENV) .pytest_cache

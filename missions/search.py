@@ -36,7 +36,7 @@ from typing import Sequence
 import numpy as np
 
 # The coverage grid is missions/coverage.py; the training environment and the flight runtime still reach these
-# names as ``search.X`` (policies/env/, autonomy/observation.py, missions/search_state_v0.py, missions/search_state_v1.py).
+# names as ``search.X`` (policies/env/, autonomy/observation.py, missions/search_state_v0.py and _v1.py).
 from missions.coverage import GRID_SIZE, SENSOR_ON_INTENSITY, cover, downsample_coverage  # noqa: F401
 from missions.scenario import CATEGORIES, WIND_FULL_SCALE_MPS, Scenario, SearchArea
 

@@ -270,8 +270,8 @@ class BeliefSearchState:
                   & (estimates[..., 1] >= scen.area[:, 2:3] + REACHABLE_MARGIN_M)
                   & (estimates[..., 1] <= scen.area[:, 3:4] - REACHABLE_MARGIN_M))
         zones = scen.obstacles
-        gap = (np.hypot(estimates[:, :, None, 0] - zones[:, None, :, 0], estimates[:, :, None, 1] - zones[:, None, :, 1])
-               - zones[:, None, :, 2])
+        gap = (np.hypot(estimates[:, :, None, 0] - zones[:, None, :, 0],
+                        estimates[:, :, None, 1] - zones[:, None, :, 1]) - zones[:, None, :, 2])
         clear = np.where(scen.obstacle_valid[:, None, :], gap >= REACHABLE_MARGIN_M, True).all(axis=2)
         kind = np.where(self.status == UNRESOLVED, 1, 0)
         kind[self.status == CONFIRMED] = 2
