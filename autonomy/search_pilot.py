@@ -11,7 +11,7 @@ candidates, confirmation rule, endurance) and the same observation builder:
 2. every K steps (a hierarchical policy) choose a goal from the meta observation and ground it to a point;
 3. act on the observation: movement in [-1, 1] scaled to the mission's speed limit (north/east, or towards and to
    the right of the observation's target, slowing on the last step with "arrive", when the artifact was trained so:
-   its ``action_frame``, ``missions.search_state_v1.movement_velocity``), search
+   its ``action_frame``, ``missions.action_frames.movement_velocity``), search
    intensity and camera zoom in [0, 1], the velocity passed through the environment's safety shield (danger zones,
    geofence: ``missions.shield``); during a close look, :attr:`Decision.altitude_m` asks the runner for the
    close-look altitude (the search state's ``altitude_target``), which it flies with vertical velocity.
@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from autonomy.observation import LAYOUT_V4, observe_search
-from autonomy.policy import Policy
-from missions.search_state_v1 import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState, movement_velocity
+from missions.action_frames import movement_velocity
+from missions.search_state_v1 import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
 from missions.search import ScenarioBatch
@@ -50,6 +51,28 @@ BINGO_FAILSAFE_S = 10.0
 would leave no more than this of the sortie's endurance, whatever the policy chose. The meta-controller had its
 bingo call at ``missions.search_state_v1.BINGO_RESERVE_S`` (20 s); a learned policy is not trusted with the last of
 the fuel, as PX4's and ArduPilot's battery failsafes do not trust a companion computer with the battery."""
+
+
+class FlownPolicy(Protocol):
+    """What the pilot needs of a policy: :class:`autonomy.policy.Policy` (a loaded artifact), or a test's scripted one."""
+
+    @property
+    def hierarchical(self) -> bool:
+        """Whether a meta-controller chooses goals (``select_goal``)."""
+
+    @property
+    def subgoal_interval(self) -> int | None:
+        """K: steps between goal decisions (None: the mission's)."""
+
+    @property
+    def action_frame(self) -> str:
+        """How its movement is read (``missions.search_state_v1.ACTION_FRAMES``)."""
+
+    def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
+        """The goal index for a meta observation."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The action (4,) for an observation."""
 
 
 @dataclass(frozen=True)
@@ -83,16 +106,14 @@ class SearchPilot:
     """Turns filtered positions into policy decisions for one mission; see the module docstring.
     ``bingo_failsafe_s``: see ``BINGO_FAILSAFE_S`` (None: off, the policy alone decides when to go home)."""
 
-    def __init__(self, mission: Mission, policy: Policy, seed: int = 0,
+    def __init__(self, mission: Mission, policy: FlownPolicy, seed: int = 0,
                  bingo_failsafe_s: float | None = BINGO_FAILSAFE_S):
         self.mission, self.policy = mission, policy
         self.bingo_failsafe_s = bingo_failsafe_s
         self.flight = mission.flight
         self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
         # how the artifact's movement is read: north / east, or towards / right of the observation's target
-        manifest = getattr(policy, "manifest", None)
-        self.action_frame = (manifest.training_config.get("action_frame", "north_east") if manifest is not None
-                             else getattr(policy, "action_frame", "north_east"))
+        self.action_frame = policy.action_frame
         # padded to the training environment's slots: the detection draws are keyed by slot
         scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence],
                                             num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from common import results_file, write_report
 
-from missions.search_state_v1 import movement_velocity
+from missions.action_frames import movement_velocity
 from missions.goals import GOAL_NAMES
 from policies.checkpoint import CheckpointPolicy
 from policies.evaluation.episodes import END_KEYS, episode_batch

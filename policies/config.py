@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.observation import LAYOUT_V3, LAYOUT_V4, ObservationLayout
-from missions.search_state_v1 import check_action_frame
+from missions.action_frames import check_action_frame
 from missions.mission import FlightSettings
 from missions.validation import Interval, check_choice, check_fields
 
@@ -67,7 +67,7 @@ class TrainConfig:
     flight: FlightSettings = field(default_factory=FlightSettings)
     """Altitude, speed, decision period, K (subgoal_interval), step limit and reach radius."""
     action_frame: str = "north_east"
-    """How the policy's movement is read (``SarSearchConfig.action_frame``, ``missions.search_state_v1.ACTION_FRAMES``):
+    """How the policy's movement is read (``SarSearchConfig.action_frame``, ``missions.action_frames.ACTION_FRAMES``):
     "north_east" (the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to its
     right) or "arrive" (as "target", slowing on the last step so that the constant action (1, 0) stops on the
     target); the exported artifact's manifest carries it and the flight pilot reads it the same way."""

@@ -217,7 +217,8 @@ def test_in_the_arrive_frame_the_constant_action_stops_on_the_target_and_holds_t
     """(1, 0) read in the arrive frame, flown by the environment's multirotor dynamics, reaches a point 300 m away at
     full speed, stops on it without passing it by more than a few metres and then holds over it below the close-look
     speed (what a close look or a landing at home needs). Read in the target frame it keeps overshooting."""
-    from missions.search_state_v1 import CLOSE_LOOK_SPEED_MPS, movement_velocity
+    from missions.action_frames import movement_velocity
+    from missions.search_state_v1 import CLOSE_LOOK_SPEED_MPS
     from sitl_bridge import dynamics
 
     flight = FlightSettings()

@@ -222,7 +222,7 @@ def test_manifest_round_trips_and_describes_the_checkpoint(runs, artifacts):
 def test_the_arrive_frame_manifest_states_the_speed_cap_the_environment_flies():
     """The manifest's unit of an "arrive" policy's movement must be the cap ``movement_velocity`` applies: the top
     speed, or the distance left over ARRIVAL_STEPS steps (one step would be twice as fast near the target)."""
-    from missions.search_state_v1 import movement_velocity
+    from missions.action_frames import movement_velocity
     from policies.config import TrainConfig
     from policies.export.artifact import build_manifest
 

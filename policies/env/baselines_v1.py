@@ -40,7 +40,7 @@ import numpy as np
 from missions import belief as belief_logic
 from missions import goals as goal_logic
 from missions import search
-from missions.search_state_v1 import arrival_speed_fraction
+from missions.action_frames import arrival_speed_fraction
 from missions.sweep_width import sweep_width_m
 from missions.validation import check_fields
 

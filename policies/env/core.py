@@ -16,7 +16,8 @@ import numpy as np
 
 from autonomy.observation import observe_search
 from missions import search
-from missions.search_state_v1 import TARGET_SLOTS, check_action_frame, movement_velocity
+from missions.action_frames import check_action_frame, movement_velocity
+from missions.search_state_v1 import TARGET_SLOTS
 from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
@@ -81,7 +82,7 @@ class SarSearchConfig:
     max_obstacles: int = 4
     """Danger-zone slots per scenario (a scenario with more is refused)."""
     action_frame: str = "north_east"
-    """How the movement components are read (``missions.search_state_v1.ACTION_FRAMES``): "north_east" (velocity
+    """How the movement components are read (``missions.action_frames.ACTION_FRAMES``): "north_east" (velocity
     north and east, the paper's), or on SarSearch-v1 "target" (towards the observation's target point and to the
     right of that line, so flying straight at the target is the constant action (1, 0)) or "arrive" (as "target",
     slowing on the last step so that (1, 0) also stops on the target)."""

@@ -40,7 +40,7 @@ from autonomy.policy_manifest import (
 )
 from autonomy.torch_compat import pt2_archive, torchscript_calls
 from missions import goals as goal_logic
-from missions.search_state_v1 import ARRIVAL_STEPS
+from missions.action_frames import ARRIVAL_STEPS
 from missions.search import SENSOR_ON_INTENSITY, ZOOM_RANGE
 from policies.checkpoint import CheckpointPolicy, checkpoint_file
 from policies.env.core import ACTION_HIGH, ACTION_LOW, ACTION_NAMES
@@ -64,7 +64,7 @@ ARRIVE_FRAME_UNITS = tuple(
                  f"({ARRIVAL_STEPS:g} * flight.step_period_s))") for unit in TARGET_FRAME_UNITS[:2]) + ACTION_UNITS[2:]
 """The action spec of a policy trained with ``action_frame`` "arrive" (SarSearch-v1): as "target", with the speed
 also capped by what covers the rest of the way to the target in ``ARRIVAL_STEPS`` steps
-(``missions.search_state_v1.arrival_speed_fraction``)."""
+(``missions.action_frames.arrival_speed_fraction``)."""
 FRAME_SPECS = {"north_east": (ACTION_NAMES, ACTION_UNITS), "target": (TARGET_FRAME_NAMES, TARGET_FRAME_UNITS),
                "arrive": (TARGET_FRAME_NAMES, ARRIVE_FRAME_UNITS)}
 ENTRY_POINTS = {
