@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from missions.fleet import MAX_SEARCH_ALTITUDE_M, Fleet
 from missions.geodesy import GeoPoint, LocalFrame
 from missions.scenario import Scenario, SearchArea
 from missions.validation import check_fields
@@ -43,12 +44,29 @@ class Mission:
     home_altitude_known: bool = True
     """Whether ``scenario.home.alt_m`` was given (a mission file may leave it out). The runner holds the search
     altitude relative to the vehicle's own home either way; a known altitude is also checked against it."""
+    fleet: Fleet | None = None
+    """The drones of a fleet mission (``missions.fleet``); None for a single drone launched from the scenario's
+    start."""
 
     def __post_init__(self) -> None:
         fence, area = self.geofence, self.scenario.area
         if fence is not None and not (fence.north_min_m <= area.north_min_m and fence.north_max_m >= area.north_max_m
                                       and fence.east_min_m <= area.east_min_m and fence.east_max_m >= area.east_max_m):
             raise ValueError("Mission.geofence must contain the search area (scenario.area)")
+        if self.fleet is not None:
+            self._check_fleet(self.fleet)
+
+    def _check_fleet(self, fleet: Fleet) -> None:
+        """Every launch point inside the geofence, and the highest layer within the search altitude limit."""
+        for vehicle in fleet.vehicles:
+            if not self.fence.contains(vehicle.north_m, vehicle.east_m):
+                raise ValueError(f"Mission.fleet must launch inside the geofence: {vehicle.name} launches at north "
+                                 f"{vehicle.north_m:g} m, east {vehicle.east_m:g} m")
+        top = fleet.search_altitude_m(len(fleet.vehicles) - 1, self.flight.altitude_m)
+        if top > MAX_SEARCH_ALTITUDE_M:
+            raise ValueError(f"Mission.fleet must search at most {MAX_SEARCH_ALTITUDE_M:g} m up: its highest drone "
+                             f"would fly at {top:g} m (flight.altitude_m + {len(fleet.vehicles) - 1} x "
+                             "altitude_layer_m); lower the altitude or the layer")
 
     @property
     def launch_point(self) -> GeoPoint:

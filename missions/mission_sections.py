@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from missions.fleet import read_fleet
 from missions.geodesy import GeoPoint
 from missions.mission import FlightSettings, Mission
 from missions.mission_fields import (InvalidField, area_span, construct, field_path, read_boolean, read_choice,
@@ -18,7 +19,7 @@ from missions.scenario import Conditions, Obstacle, Scenario, SearchArea, SeaSta
 GENERATOR_SPLITS: tuple[str, ...] = ("train", "val", "test")
 """Splits a ``generator`` reference may name (those of missions.generator.scenario_seeds)."""
 
-_TOP_KEYS = ("name", "flight", "geofence", "scenario")
+_TOP_KEYS = ("name", "flight", "geofence", "scenario", "fleet")
 _INLINE_KEYS = ("home", "area", "start", "datum", "targets", "obstacles", "conditions", "current", "endurance_s",
                 "seed", "name")
 _CURRENT_KEYS = ("north_mps", "east_mps", "forecast_north_mps", "forecast_east_mps")
@@ -42,9 +43,12 @@ def read_mission(data: Any, base_dir: Path, default_name: str) -> Mission:
     geofence = construct(SearchArea, "geofence", **read_numbers(spec["geofence"], "geofence", _AREA_KEYS)) \
         if "geofence" in spec else None
     scenario = _scenario(spec["scenario"], "scenario", base_dir)
+    fleet = read_fleet(spec["fleet"], "fleet", (scenario.start_north_m, scenario.start_east_m)) \
+        if "fleet" in spec else None
     details = {"geofence": f"geofence {area_span(geofence)}, area {area_span(scenario.area)}"} if geofence else {}
-    return construct(Mission, "", details=details, scenario=scenario, flight=flight, name=name, geofence=geofence,
-                      home_altitude_known=_home_altitude_given(spec["scenario"]))
+    return construct(Mission, "", paths={"Mission.fleet": "fleet"}, details=details, scenario=scenario,
+                     flight=flight, name=name, geofence=geofence, fleet=fleet,
+                     home_altitude_known=_home_altitude_given(spec["scenario"]))
 
 
 def _home_altitude_given(scenario: Any) -> bool:

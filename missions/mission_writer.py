@@ -15,6 +15,7 @@ from typing import Any
 
 import yaml
 
+from missions.fleet import fleet_to_dict
 from missions.mission import Mission
 from missions.scenario import Scenario
 
@@ -29,6 +30,8 @@ def mission_to_dict(mission: Mission) -> dict[str, Any]:
     data["scenario"] = _scenario_to_dict(mission.scenario)
     if not mission.home_altitude_known:  # written as read: an unknown altitude must not become a known 0
         del data["scenario"]["home"]["alt_m"]
+    if mission.fleet is not None:
+        data["fleet"] = fleet_to_dict(mission.fleet)
     return data
 
 

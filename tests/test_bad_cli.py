@@ -48,7 +48,7 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
               (["--out", "{tmp}/r", "--set", "warmup_steps=-1"], "TrainConfig.warmup_steps must be an integer"),
               (["--out", "{tmp}/r", "--resume"], "--resume: no checkpoint in"),
               (["--out", "{tmp}/r", "--set", 'missions=["{tmp}/sweep.yaml"]'],  # a training mission file, broken
-               "{tmp}/sweep.yaml: runs: unknown key (allowed: name, flight, geofence, scenario)"),
+               "{tmp}/sweep.yaml: runs: unknown key (allowed: name, flight, geofence, scenario, fleet)"),
               (["--out", "/dev/null/run"], "/dev/null/run"),
               ([], "--out is required: the run folder to write (or --sweep FILE --run NAME)"),
               (["--sweep", MISSING], f"{MISSING}: file not found"),

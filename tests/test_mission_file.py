@@ -233,7 +233,7 @@ ERRORS = {
     "unknown key": (changed(flight__altitud_m=60),
                     f"flight.altitud_m: unknown key, did you mean 'altitude_m'? (allowed: {FLIGHT_KEYS})"),
     "unknown top-level key": (changed(fligth={}), "fligth: unknown key, did you mean 'flight'? "
-                                                  "(allowed: name, flight, geofence, scenario)"),
+                                                  "(allowed: name, flight, geofence, scenario, fleet)"),
     "unknown key without suggestion": (changed(scenario__conditions__zzz=1),
                                        "scenario.conditions.zzz: unknown key (allowed: sea, weather, time_of_day, "
                                        "visibility, wind, wind_direction_deg)"),
@@ -304,7 +304,7 @@ ERRORS = {
                                 "scenario.generator.index: missing required key (give split and index, or seed)"),
     "dataset without image": (changed(scenario={"dataset": {"root": ".", "split": "test"}}),
                               "scenario.dataset.image: missing required key (required here: root, split, image)"),
-    "not a mapping": ([1, 2], "must be a mapping with keys name, flight, geofence, scenario, got a list"),
+    "not a mapping": ([1, 2], "must be a mapping with keys name, flight, geofence, scenario, fleet, got a list"),
     "malformed YAML": ("name: demo\nflight: {altitude_m: 50\nscenario: x\n",
                        "line 3, column 9: malformed YAML: expected ',' or '}', but got ':' "
                        "(while parsing a flow mapping)"),
