@@ -30,6 +30,9 @@ A mission file says how to fly (``flight``), where the drone may go (``geofence`
       endurance_s: 900                                                  # optional (unlimited): sortie endurance
       seed: 7                                                           # optional (0)
       name: hand-made                                                   # optional, informational
+    fleet:                      # optional: several drones fly this search (missions/fleet.py)
+      count: 3
+      launch_line: {bearing_deg: 90, spacing_m: 40}
 
 Instead of the inline fields, a scenario can be a reference:
 
