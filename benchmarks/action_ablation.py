@@ -25,7 +25,7 @@ It also prints what the deterministic policy does (mean movement command, share 
 mean zoom, goal shares; HRL-SAC: how far the movement command points off the goal's point while the drone is
 farther than the reach radius, as a median and the share of steps more than 30 degrees off). A large gain
 from sampling, from forcing the sensor on or from full speed says the learned deterministic action, not the
-policy's knowledge of where to fly, is what fails (docs/results/README.md).
+policy's knowledge of where to fly, is what fails.
 
 Usage: python benchmarks/action_ablation.py RUN [--episodes 300] [--split test] [--out FILE]
 """

@@ -3,7 +3,7 @@
 Flies the run's deterministic policy (both levels) on the first --episodes scenarios of the split (scenario i,
 episode seed i), counting the goal of every decision; prints the share of each goal and the success, ran-dry and
 returned rates, and writes them to benchmarks/results/goal_mix.json. It is how a meta-controller's collapse onto
-one goal is seen (docs/results/README.md, "SarSearch-v1").
+one goal (ReturnToBase, TrackObject) is seen (docs/training.md, "SarSearch-v1 options").
 
 Usage: python benchmarks/goal_mix.py RUN [RUN ...] [--episodes 200] [--split val]
 """
