@@ -72,7 +72,10 @@ def read_fence(autopilot: str, values: dict[str, float]) -> AutopilotFence:
                               PX4_ACTIONS.get(action, f"GF_ACTION {action}"), action >= 2,
                               ("GF_MAX_HOR_DIST", "GF_MAX_VER_DIST", ""))
     enabled, types, action = int(values["FENCE_ENABLE"]) == 1, int(values["FENCE_TYPE"]), int(values["FENCE_ACTION"])
-    on = (lambda bit: enabled and bool(types & bit))
+
+    def on(bit: int) -> bool:
+        return enabled and bool(types & bit)
+
     return AutopilotFence(values["FENCE_RADIUS"] if on(CIRCLE) else None,
                           values["FENCE_ALT_MAX"] if on(ALT_MAX) else None,
                           values["FENCE_ALT_MIN"] if on(ALT_MIN) else None,

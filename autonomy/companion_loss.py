@@ -77,8 +77,8 @@ def judge_companion_loss(autopilot: str, params: dict[str, float],
             acts = monitored and value.get(action) not in (None, 0, 5) and armed_threshold
             battery_acts |= acts
             setting = f"{action} {value[action]}" if monitored and action in value else "no battery monitor"
-            steps.append(f"{level} battery: {ARDUPILOT_ACTIONS.get(value.get(action), 'nothing') if acts else 'nothing'} "
-                         f"({setting})")
+            done = ARDUPILOT_ACTIONS.get(value.get(action), "nothing") if acts else "nothing"
+            steps.append(f"{level} battery: {done} ({setting})")
         ends = gcs_counts or battery_acts
         fix = ("set BATT_FS_LOW_ACT=2 (RTL at BATT_LOW_VOLT), or FS_GCS_ENABLE=1 with SYSID_MYGCS="
                f"{companion_system_id if companion_system_id is not None else 'this computer'}")

@@ -31,6 +31,7 @@ from autonomy.autopilots import LINK_LOSS_PARAM, AutopilotFlavour, link_loss_mod
 from autonomy.estimator import PoseEstimator
 from autonomy.link_loss import LinkLossMonitor
 from autonomy.runner_config import RunnerConfig
+from autonomy.vehicle_connection import VehicleConnection
 from autonomy.vehicle_time import BootTimeMap
 
 
@@ -49,8 +50,8 @@ class Verdict:
     """"resume": why that switch was the vehicle's own link-loss failsafe."""
 
 
-def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavour, link_loss: LinkLossMonitor,
-                 boot_time: BootTimeMap, last_resumed_s: float,
+def judge_search(now: float, link: VehicleConnection, config: RunnerConfig, flavour: AutopilotFlavour,
+                 link_loss: LinkLossMonitor, boot_time: BootTimeMap, last_resumed_s: float,
                  from_home: Callable[[], tuple[float, float, float] | None] = lambda: None) -> Verdict | None:
     """The verdict on the search at ``now`` (None: carry on). ``link`` is the vehicle link (pymavlink or MAVSDK);
     ``last_resumed_s`` is when the search last had news of its policy (its last decision, the last transition, the
@@ -75,7 +76,7 @@ def judge_search(now: float, link, config: RunnerConfig, flavour: AutopilotFlavo
     if battery is not None and battery <= config.low_battery_pct:
         return Verdict("end", f"battery at {battery:g} %: RTL", "low battery")
     if mode != companion:
-        params = getattr(link, "params", {})
+        params = link.params
         link_loss.modes = link_loss_modes(flavour, params)
         safety = link_loss.safety_failsafe(now)
         where = from_home() if safety is None else None

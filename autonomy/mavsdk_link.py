@@ -1,7 +1,7 @@
 """The runner's optional MAVSDK backend (``hrlsac mission run --backend mavsdk``).
 
-:class:`MavsdkLink` offers the runner the same interface as :class:`autonomy.vehicle_link.VehicleLink`, backed by
-MAVSDK-Python's asyncio API instead of raw pymavlink: arming, take-off, OFFBOARD and RTL go through MAVSDK's
+:class:`MavsdkLink` is the runner's :class:`autonomy.vehicle_connection.VehicleConnection` backed by MAVSDK-Python's
+asyncio API instead of raw pymavlink: arming, take-off, OFFBOARD and RTL go through MAVSDK's
 Action and Offboard plugins (setpoints through ``Offboard.set_velocity_ned``), telemetry comes from its
 Telemetry subscriptions and is handed to the runner as GLOBAL_POSITION_INT messages (built with pymavlink), so
 the Kalman filter and everything after it are the same code.
@@ -25,7 +25,9 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand
-from autonomy.vehicle_link import MAX_STATUS_TEXTS, CommandAck, LinkError, texts_after
+from autonomy.vehicle_connection import MAX_STATUS_TEXTS, CommandAck, first_ack, texts_after
+from autonomy.vehicle_link import LinkError
+from mavlink_signing import LinkSigning
 from missions.geodesy import GeoPoint
 
 _FLIGHT_MODES = {"HOLD": "LOITER", "RETURN_TO_LAUNCH": "RTL", "TAKEOFF": "TAKEOFF", "LAND": "LAND",
@@ -51,6 +53,7 @@ class MavsdkLink:
 
         self.clock = clock
         self.recorder = None
+        self.signing: LinkSigning | None = None  # MAVSDK's Python API cannot sign
         self.target_system: int | None = None
         self.target_component = 1
         self.last_vehicle_message_s: float | None = None
@@ -157,7 +160,7 @@ class MavsdkLink:
             except (ValueError, KeyError, TypeError):  # a malformed message is not an answer
                 continue
 
-    # ------------------------------------------------------------------ the VehicleLink interface
+    # ------------------------------------------------------------------ the VehicleConnection interface
     def tick(self) -> list:
         samples, self._samples = self._samples, []
         return samples
@@ -195,7 +198,7 @@ class MavsdkLink:
         return self._battery
 
     def ack_for(self, command: int, since_s: float) -> CommandAck | None:
-        return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
+        return first_ack(self.acks, command, since_s)
 
     def request_message_interval(self, message_id: int, rate_hz: float) -> None:
         """MAVSDK sets rates per telemetry topic, not per message: only the position rate is set (MAVSDK asks for

@@ -32,7 +32,8 @@ def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.Argumen
                              "policy's training settings (warns, naming each difference); refused without it")
     parser.add_argument("--signing-key", metavar="FILE", default=None,
                         help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything sent, drop wrongly "
-                             "signed or replayed messages" + (" (the simulated vehicle uses it too)" if simulated else ""))
+                             "signed or replayed messages"
+                             + (" (the simulated vehicle uses it too)" if simulated else ""))
     return parser
 
 
@@ -103,12 +104,14 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
     from autonomy.runner import MissionRunner, WallClock
     from autonomy.search_pilot import SearchPilot
+    from autonomy.vehicle_connection import VehicleConnection
     from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
     from mavlink_signing import wall_timestamp
 
     clock = WallClock()
     out.mkdir(parents=True, exist_ok=True)
     tlog = None
+    link: VehicleConnection
     try:
         if args.backend == "mavsdk":
             from autonomy.mavsdk_link import MavsdkLink
@@ -140,11 +143,9 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     finally:
         if tlog is not None:
             tlog.close()
-            connection.close()
-        else:
-            link.close()
+        link.close()
     report.update(facts, tlog_messages=tlog.messages if tlog else None)
-    if getattr(link, "signing", None) is not None:
+    if link.signing is not None:
         report["signing"] = {"runner": link.signing.summary()}
     partial.finish(report)
     print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "

@@ -63,6 +63,7 @@ import numpy as np
 
 from missions.goals import GOAL_NAMES, NO_GOAL  # noqa: F401  (re-exported: the runtime names goals from here)
 from missions.search import downsample_coverage
+from missions.search_state_v1 import BeliefSearchState
 
 TARGET_OFFSET_SCALE_M = 20.0
 """Distance at which ``target_offset`` has length 0.5."""
@@ -228,7 +229,7 @@ def observe_search(state, goal_conditioned: bool, rows: np.ndarray | None = None
     runner both give the policy. ``goal_conditioned``: HRL-SAC's target and goal one-hot; otherwise flat SAC's.
     A ``missions.search_state_v0.SearchState`` (SarSearch-v0) gives layout 3, a
     ``missions.search_state_v1.BeliefSearchState`` (SarSearch-v1) layout 4."""
-    if hasattr(state, "belief"):
+    if isinstance(state, BeliefSearchState):
         return _observe_belief_search(state, goal_conditioned, rows, out)
     rows = slice(None) if rows is None else rows
     scen = state.scen

@@ -73,6 +73,12 @@ class Policy:
         """K: steps between goal decisions (None for a flat policy)."""
         return self.manifest.subgoal_interval
 
+    @property
+    def action_frame(self) -> str:
+        """How its movement is read (``missions.search_state_v1.ACTION_FRAMES``): as trained, north / east unless the
+        training said otherwise."""
+        return self.manifest.training_config.get("action_frame", "north_east")
+
     def goal_due(self, step: int) -> bool:
         """Whether the meta-controller decides at this step of a mission by the clock alone
         (``missions.goals.goal_due``: steps 0, K, 2K, ... since the last decision); never for a flat policy. For

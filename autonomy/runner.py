@@ -43,7 +43,8 @@ from autonomy.preflight import describe_point, home_disagreement, judge_autopilo
 from autonomy.runner_config import RunnerConfig
 from autonomy.search_pilot import Decision, DecisionWorker, SearchPilot
 from autonomy.setpoints import HOLD, SetpointStreamer, StreamConfig, VelocityCommand
-from autonomy.vehicle_link import VehicleLink, enum_name
+from autonomy.vehicle_connection import VehicleConnection
+from autonomy.vehicle_link import enum_name
 from autonomy.vehicle_time import BootTimeMap, receive_telemetry
 from missions.mission import Mission
 
@@ -60,7 +61,7 @@ class MissionAborted(RuntimeError):
 class MissionRunner:
     """Flies one mission; see the module docstring. ``run()`` returns the mission report (a dict)."""
 
-    def __init__(self, mission: Mission, pilot: SearchPilot, link: VehicleLink, clock: Clock,
+    def __init__(self, mission: Mission, pilot: SearchPilot, link: VehicleConnection, clock: Clock,
                  estimator: PoseEstimator, config: RunnerConfig = RunnerConfig(), threaded_policy: bool = False,
                  say: Callable[[str], None] = lambda text: None,
                  on_decision: Callable[[Decision], None] = lambda decision: None, simulated_policy_s: float = 0.0):
@@ -75,7 +76,7 @@ class MissionRunner:
         self.worker = DecisionWorker(pilot, threaded_policy, simulated_policy_s)
         self.boot_time = BootTimeMap(config.boot_time)
         self.flavour: AutopilotFlavour = PX4  # until the vehicle's heartbeat says otherwise
-        self.link_loss = LinkLossMonitor(config.link_loss, self.flavour, self._probe_sender())
+        self.link_loss = LinkLossMonitor(config.link_loss, self.flavour, link.send_timesync_request)
         self._texts_seen = 0
         self._link_back_s = -math.inf  # when telemetry last came back after a silence (decisions restart then)
         self._waiting_reported: str | None = None  # what the runner last said it waits for
@@ -135,10 +136,6 @@ class MissionRunner:
         """The parameters the preflight checks read: the judged ones and what the autopilot does without us;
         ``read``: what has arrived, which decides whether ArduPilot's battery ones exist (companion_loss_params)."""
         return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name, read))))
-
-    def _probe_sender(self) -> Callable[[int], None] | None:
-        """The link's TIMESYNC request, if it can send one (autonomy.uplink_probe; both backends can)."""
-        return getattr(self.link, "send_timesync_request", None)
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str,
                    repeat: tuple[float, Callable[[], None]] | None = None) -> None:
@@ -204,7 +201,7 @@ class MissionRunner:
             self.flavour = flavour_for(self.link.autopilot)
         except UnsupportedAutopilot as exc:
             raise MissionAborted(str(exc)) from None
-        self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour, self._probe_sender())
+        self.link_loss = LinkLossMonitor(self.config.link_loss, self.flavour, self.link.send_timesync_request)
         self.link.request_params(self._preflight_params())  # read while the pose estimate converges
         self._record("PREFLIGHT", f"{self.link.vehicle_description()}, flown as {self.flavour.name}")
 
@@ -250,7 +247,7 @@ class MissionRunner:
             pass  # judged with what arrived
         judgement = judge_autopilot_settings(self.flavour.name, self.link.params, self.mission, home,
                                              self.config.fence_margin_m,
-                                             getattr(self.link, "companion_system_id", None),
+                                             self.link.companion_system_id,
                                              self.config.param_timeout_s)
         self.autopilot_fence, self.companion_loss = judgement.autopilot_fence, judgement.companion_loss
         for kind, text in judgement.events:
@@ -339,7 +336,7 @@ class MissionRunner:
         self._last_decision_s = now
         vn, ve = self._fence_guard(vn, ve, now)
         # A close look may ask for another height (Decision.altitude_m); None: the mission's search altitude.
-        wanted = getattr(decision, "altitude_m", None)
+        wanted = decision.altitude_m
         self._height_target_m = self.mission.flight.altitude_m if wanted is None else float(wanted)
         self.streamer.command(VelocityCommand(vn, ve, self._altitude_hold()), now)
         self._set_zoom(decision.zoom)

@@ -54,7 +54,7 @@ the fuel, as PX4's and ArduPilot's battery failsafes do not trust a companion co
 
 
 class FlownPolicy(Protocol):
-    """What the pilot needs of a policy: :class:`autonomy.policy.Policy` (a loaded artifact), or a test's scripted one."""
+    """What the pilot needs of a policy: :class:`autonomy.policy.Policy` (a loaded artifact) or a scripted one."""
 
     @property
     def hierarchical(self) -> bool:
@@ -163,8 +163,9 @@ class SearchPilot:
             self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
         movement = np.clip(action[:2], -1.0, 1.0) if finite else np.array([np.nan] * 2)
         if finite:  # as the training environment read it (its action_frame)
-            movement = movement_velocity(movement[None], state.position, state.target_position(self.policy.hierarchical),
-                                         self.action_frame, self.flight.max_speed_mps, self.flight.step_period_s)[0]
+            target_ne = state.target_position(self.policy.hierarchical)
+            movement = movement_velocity(movement[None], state.position, target_ne, self.action_frame,
+                                         self.flight.max_speed_mps, self.flight.step_period_s)[0]
         else:
             movement = movement * self.flight.max_speed_mps
         if finite:  # the environment's safety filter: danger zones and geofence (missions.shield)

@@ -30,26 +30,18 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from autonomy.setpoints import VelocityCommand, setpoint_message_args
+from autonomy.vehicle_connection import MAX_STATUS_TEXTS, CommandAck, first_ack, texts_after
 from missions.geodesy import GeoPoint
 from mavlink_signing import MAVLINK1, SIGNED, UNSIGNED, LinkSigning, simulated_timestamp
 
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 1.0
-MAX_STATUS_TEXTS = 100  # the runner quotes the last two; a chatty or hostile vehicle must not grow memory
 STATUSTEXT_LEN = 50  # bytes of STATUSTEXT.text; longer texts come in chunks
 MAX_STATUSTEXT_CHARS = 1000  # a joined text is cut here
 INTEGER_PARAM_TYPES = (mavlink.MAV_PARAM_TYPE_INT8, mavlink.MAV_PARAM_TYPE_UINT8, mavlink.MAV_PARAM_TYPE_INT16,
                        mavlink.MAV_PARAM_TYPE_UINT16, mavlink.MAV_PARAM_TYPE_INT32, mavlink.MAV_PARAM_TYPE_UINT32)
 _URL = re.compile(r"^(udpin|udpout|tcp):[^:]+:\d{1,5}$")
 _NOT_A_VEHICLE = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
-
-
-def texts_after(log: deque, total: int, count: int) -> list[tuple[float, str]]:
-    """The (time, text) STATUSTEXTs of ``log`` received after the first ``count`` of ``total`` ever received (at
-    most the last MAX_STATUS_TEXTS, which the log keeps)."""
-    entries = list(log)
-    new = min(total - count, len(entries))
-    return entries[len(entries) - new:] if new > 0 else []
 
 
 class LinkError(RuntimeError):
@@ -87,17 +79,11 @@ def open_connection(url: str, system_id: int = 1):
 
 
 @dataclass
-class CommandAck:
-    command: int
-    result: int
-    time_s: float
-
-
-@dataclass
 class VehicleLink:
-    """See the module docstring. ``clock()`` is the run's time in seconds."""
+    """The pymavlink :class:`autonomy.vehicle_connection.VehicleConnection`; see the module docstring. ``clock()`` is
+    the run's time in seconds."""
 
-    conn: object
+    conn: mavutil.mavfile
     clock: Callable[[], float]
     recorder: Recorder | None = None
     target_system: int | None = None
@@ -226,7 +212,7 @@ class VehicleLink:
         PX4 gives every text an id and sends nothing after a full last chunk (STATUSTEXT.hpp), so a text waiting
         for more is also complete when another id starts (and then comes before it). PX4's ids count from 0 per
         link (``_id++``, wrapping at 65536), so from PX4 an id of 0 is chunked like any other."""
-        text_id = getattr(msg, "id", 0) or 0
+        text_id = msg.id
         parts = self._statustext_parts
         done = [parts["text"]] if parts and parts["id"] != text_id else []
         if not text_id and self.autopilot != mavlink.MAV_AUTOPILOT_PX4:
@@ -245,10 +231,10 @@ class VehicleLink:
         garbage (any frame with an unknown id is "decoded": its CRC cannot be checked) and hostile PARAM_VALUEs
         would grow these without bound. The runner uses neither: drop them."""
         if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_UNKNOWN:
-            for state in getattr(self.conn, "sysid_state", {}).values():
+            for state in self.conn.sysid_state.values():
                 state.messages.pop(msg.get_type(), None)
         elif msg.get_type() == "PARAM_VALUE":
-            getattr(self.conn, "param_state", {}).clear()
+            self.conn.param_state.clear()
 
     def _on_send(self, msg) -> None:
         if self.recorder is not None:
@@ -313,7 +299,7 @@ class VehicleLink:
 
     def ack_for(self, command: int, since_s: float) -> CommandAck | None:
         """The first ACK of ``command`` received at or after ``since_s``."""
-        return next((a for a in self.acks if a.command == command and a.time_s >= since_s), None)
+        return first_ack(self.acks, command, since_s)
 
     # ------------------------------------------------------------------ what the runner sends
     def _target(self) -> tuple[int, int]:
@@ -359,3 +345,7 @@ class VehicleLink:
         del now_s  # the stream's schedule; the message carries our boot time
         self._mav.set_position_target_local_ned_send(
             *setpoint_message_args(command, self.time_boot_ms, *self._target()))
+
+    def close(self) -> None:
+        """Close the pymavlink connection."""
+        self.conn.close()

@@ -32,7 +32,7 @@ from missions.validation import check_fields
 
 if TYPE_CHECKING:  # types only: the link and the estimator do not need this module
     from autonomy.estimator import PoseEstimator
-    from autonomy.vehicle_link import VehicleLink
+    from autonomy.vehicle_connection import VehicleConnection
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,7 @@ class BootTimeMap:
             self.last_change = reason
 
 
-def receive_telemetry(link: VehicleLink, estimator: PoseEstimator, boot_time: BootTimeMap) -> list:
+def receive_telemetry(link: VehicleConnection, estimator: PoseEstimator, boot_time: BootTimeMap) -> list:
     """Everything the vehicle sent since the last call, its positions fused into the estimator on the runner's clock
     (``boot_time`` maps their time_boot_ms; a new vehicle timeline restarts the filter). The runner's whole receive
     path: :mod:`tests.test_fuzz_mavlink` feeds it garbage."""

@@ -8,12 +8,15 @@ where a test needs a misbehaving policy it wraps the artifact's entry points (a 
 """
 from __future__ import annotations
 
+import ast
 import dataclasses
+import inspect
 import json
 import math
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -337,3 +340,33 @@ def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, t
     # the autopilot's fence parameters, read through MAVSDK's Param plugin (GF_ACTION an INT32, the others floats)
     assert report["autopilot_fence"] == {"checked": True, "acts": False,
                                          "description": "no limit set, on a breach: Hold"}
+
+
+def _assigned_attributes(cls) -> set[str]:
+    """The names a class assigns as ``self.NAME`` anywhere in its source."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    return {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+            and node.value.id == "self" and isinstance(node.ctx, ast.Store)}
+
+
+@pytest.mark.parametrize("backend", ["autonomy.vehicle_link.VehicleLink", "autonomy.mavsdk_link.MavsdkLink"])
+def test_both_backends_implement_the_vehicle_connection_the_runner_is_typed_with(backend):
+    """Every member of ``VehicleConnection`` is defined by the pymavlink and the MAVSDK client, each method taking
+    the protocol's parameters: the runner never asks which client it has."""
+    import importlib
+
+    from autonomy.vehicle_connection import VehicleConnection
+
+    module, name = backend.rsplit(".", 1)
+    cls = getattr(importlib.import_module(module), name)
+    members = {name for name in vars(VehicleConnection) if not name.startswith("_")}
+    defined = set(dir(cls)) | _assigned_attributes(cls)
+    if dataclasses.is_dataclass(cls):
+        defined |= {f.name for f in dataclasses.fields(cls)}
+    assert members - defined == set()
+    for member in members:
+        wanted = getattr(VehicleConnection, member)
+        if inspect.isfunction(wanted):
+            ours = list(inspect.signature(getattr(cls, member)).parameters)
+            assert list(inspect.signature(wanted).parameters) == ours[:len(inspect.signature(wanted).parameters)], \
+                member

@@ -7,7 +7,7 @@ so the runner learns of an uplink outage from the vehicle no longer answering it
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import pytest
 
@@ -107,6 +107,7 @@ class StillLink:
     flight_mode: str
     last_vehicle_message_s: float = 0.0
     armed: bool = True
+    params: dict = field(default_factory=dict)
 
     def battery_percent(self) -> float | None:
         return 80.0
