@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from autonomy.runner_core import RunnerCore
 
-def mission_report(runner) -> dict:
+
+def mission_report(runner: RunnerCore) -> dict:
     """The report of ``runner``'s mission so far (an ``autonomy.runner.MissionRunner``; complete once ``run()`` has
-    returned). Not typed with the class: that import would make the two modules a cycle."""
+    returned)."""
     search = runner.pilot.summary()
     path = np.array([(n, e) for _, n, e in runner.trajectory]) if runner.trajectory else np.zeros((0, 2))
     return {
