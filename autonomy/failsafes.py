@@ -18,8 +18,8 @@ order (the first that applies wins):
    ``autonomy.link_loss`` has the evidence and resumptions are left (``resume``); anything else is a pilot's
    decision (``end``).
 
-The runner acts on the verdict (``MissionRunner._check_failsafes``): it records the event, ends the search with
-``search_end`` (then returns home), or resumes.
+The runner acts on the verdict (``autonomy.search_loop.SearchLoop._check_failsafes``): it records the event, ends
+the search with ``search_end`` (then returns home), or resumes.
 """
 from __future__ import annotations
 

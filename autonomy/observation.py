@@ -49,11 +49,12 @@ goal                     284     4     one-hot of the meta-controller's goal (al
 
 In version 4, ``time_progress`` still counts the step limit; ``energy_left`` and ``return_cost`` are what a crew
 would know of its endurance. Version 3 changed only the squashing scale of ``target_offset``, from 100 m to 20 m:
-with 100 m the offset to a sub-goal point a cell or two away (31-62 m, where the search's goals usually lie) was a
-short vector (0.24-0.38), and the learned low level flew slowly towards such points; with 20 m its length is
-0.61-0.76 there (measured: docs/training.md, "How the defaults were chosen"). Version 2 changed only
-``target_offset`` too: version 1 held the target's absolute position, normalised like ``agent_position``. A goal-conditioned low level then has to subtract two
-inputs among 276 to find its way, with a 15 m reach radius worth 1 % of the area; it reached 5 % of its sub-goals.
+with 100 m the offset to a sub-goal point a cell or two away (31-62 m, where the search's goals usually lie) is a
+short vector (0.24-0.38), and a learned low level flies slowly towards such points; with 20 m its length is
+0.61-0.76 there (docs/training.md, "How the defaults were chosen"). Version 2 changed only ``target_offset`` too:
+version 1 held the target's absolute position, normalised like ``agent_position``, so a goal-conditioned low level
+had to subtract two inputs among 276 to find its way, with a 15 m reach radius worth 1 % of the area, and seldom
+reached its sub-goals.
 """
 from __future__ import annotations
 

@@ -16,9 +16,9 @@ The hierarchy as the runner needs it: every step ``act(obs)``; every K-th step (
 Denormal floats: both calls run their program with the CPU's flush-to-zero / denormals-are-zero mode on
 (``torch.set_flush_denormal``), as real-time inference code does, and turn it off again after it (so the caller's
 own numpy and torch arithmetic, the belief search's tiny probabilities included, is not changed; a caller that had
-turned it on itself finds it off). Observations carry denormal values (tiny belief probabilities, about a quarter
-of the steps), and on x86 every multiply with one takes a microcode assist: on an Intel Xeon that tripled the p99
-of a decision step (docs/export.md, "Latency"). A denormal is below any difference the networks resolve, so the
+turned it on itself finds it off). Observations carry denormal values (tiny belief probabilities), and on x86 every
+multiply with one takes a microcode assist, which makes the slowest decision steps several times slower
+(docs/export.md, "Latency"). A denormal is below any difference the networks resolve, so the
 actions are those of the trained networks (tests/test_export.py).
 """
 from __future__ import annotations
@@ -75,7 +75,7 @@ class Policy:
 
     @property
     def action_frame(self) -> str:
-        """How its movement is read (``missions.search_state_v1.ACTION_FRAMES``): as trained, north / east unless the
+        """How its movement is read (``missions.action_frames.ACTION_FRAMES``): as trained, north / east unless the
         training said otherwise."""
         return self.manifest.training_config.get("action_frame", "north_east")
 

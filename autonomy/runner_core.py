@@ -163,7 +163,7 @@ class RunnerCore:
         The estimator's NED frame is the mission's home point (``estimator.origin``); its altitude may differ from
         the vehicle's home (a mission file without ``alt_m``, a home set at arming). Heights are always taken above
         the vehicle's home, as the autopilot's own takeoff, RTL and relative altitude are: holding them relative to
-        the mission's altitude flew the drone into the water when the two disagreed.
+        the mission's altitude would fly the drone into the water when the two disagree.
         """
         if self.estimator.time_s is None:
             return 0.0

@@ -66,7 +66,7 @@ class FlownPolicy(Protocol):
 
     @property
     def action_frame(self) -> str:
-        """How its movement is read (``missions.search_state_v1.ACTION_FRAMES``)."""
+        """How its movement is read (``missions.action_frames.ACTION_FRAMES``)."""
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         """The goal index for a meta observation."""

@@ -14,7 +14,7 @@ connection instead. :class:`VehicleLink` then does what every companion computer
   replayed messages, and warns once when the vehicle's messages arrive unsigned (see mavlink_signing).
 
 It does not wait for anything itself: the runner owns time (simulated in lockstep, real otherwise) and waits by
-ticking; see ``autonomy.runner``.
+ticking; see ``autonomy.runner_core``.
 """
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ end of the link, timed on the simulated clock and seeded by the run's seed (or t
 as reproducible as a clean one. A :class:`simulation.flight_outcome.FlightWatch` judges every replay from the
 simulator's ground truth (completed, ended safely, or flyaway; the report's ``outcome``).
 
-This is the one module of ``autonomy`` that uses ``sitl_bridge`` (the simulated vehicle); a companion
-computer flying a real autopilot never imports it.
+Here the on-board runtime (``autonomy``) meets the simulated vehicle (``sitl_bridge``); the runtime itself never
+imports the simulator, so a companion computer flying a real autopilot has no use for this module.
 """
 from __future__ import annotations
 
