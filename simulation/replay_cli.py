@@ -20,6 +20,10 @@ from simulation.parallel_replay import ReplayEpisode, replay_episodes
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 REPLAY_SUMMARY = GROUPS["mission"]["replay"][1]  # written once, in the dispatcher's table
+PROGRESS_EVERY_S = 0.2
+"""How often the progress bar is redrawn on a terminal."""
+PROGRESS_LOG_EVERY_S = 10.0
+"""How often a progress line is written when stderr is not a terminal (a log file, CI)."""
 
 
 def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
@@ -53,6 +57,33 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
         raise ValueError(str(exc)) from None
 
 
+class _LineStream:
+    """stderr when it is not a terminal: each progress update on a line of its own instead of carriage returns."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        line = text.replace("\r", "").rstrip()
+        if line:
+            self.stream.write(line + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+def episode_progress(total: int, quiet: bool):
+    """A progress bar of ``total`` episodes on stderr, with the rate and the time left (tqdm); off with ``quiet`` or
+    a single episode (which narrates its flight instead). On a terminal it redraws in place; elsewhere it writes a
+    line at most every PROGRESS_LOG_EVERY_S. It writes nothing else, so no output file depends on it."""
+    from tqdm import tqdm
+
+    terminal = sys.stderr.isatty()
+    return tqdm(total=total, desc="episodes", unit="episode", disable=quiet or total == 1,
+                file=sys.stderr if terminal else _LineStream(sys.stderr), dynamic_ncols=terminal,
+                mininterval=PROGRESS_EVERY_S if terminal else PROGRESS_LOG_EVERY_S)
+
+
 def _replay(mission, policy, args, out: Path, prog: str) -> int:
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
     options = dict(signing_key=args.key, link_faults=args.faults)
@@ -60,24 +91,23 @@ def _replay(mission, policy, args, out: Path, prog: str) -> int:
                               out if args.episodes == 1 else out / f"seed-{args.seed + episode:05d}",
                               video=not args.no_video, narrate=args.episodes == 1 and not args.quiet, options=options)
                 for episode in range(args.episodes)]
-    finished = []
+    successes = 0
     started = time.perf_counter()
+    progress = episode_progress(args.episodes, quiet=args.quiet)
 
     def show_progress(index: int, report: dict) -> None:
-        finished.append(report)
-        if args.episodes > 1 and not args.quiet:
-            done = len(finished)
-            rate = sum(r["success"] for r in finished) / done
-            print(f"\r[{'#' * (30 * done // args.episodes):<30}] {done}/{args.episodes} episodes  "
-                  f"success {rate:.0%}  ({time.perf_counter() - started:.0f} s)", end="", file=sys.stderr)
+        nonlocal successes
+        successes += bool(report["success"])
+        progress.set_postfix_str(f"success {successes / (progress.n + 1):.0%}", refresh=False)
+        progress.update(1)
 
     try:
         reports = replay_episodes(episodes, args.pool, show_progress)
     except WorkerPoolError as exc:
+        progress.close()
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
-    if args.episodes > 1 and not args.quiet:
-        print(file=sys.stderr)
+    progress.close()
     wall = time.perf_counter() - started
     simulated = sum(r["flight_time_s"] for r in reports)
     successes = sum(r["success"] for r in reports)
