@@ -90,12 +90,12 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
     clock = VehicleClock(vehicle, watch.observe)
     run_facts = dict(policy=str(policy.path), policy_sha256=policy.sha256, seed=seed, clock="lockstep",
                      link_faults=link_faults.describe() if link_faults is not None else "none")
-    tlog = video_out = None
+    tlog = pictures = None
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         tlog = TlogRecorder(out / TLOG)
-        video_out = VideoRecorder(out) if video else None
+        pictures = VideoRecorder(out, video)
     connection = MemoryMavConnection(client_end, source_system=1, source_component=COMPANION_COMPONENT)
     link = VehicleLink(connection, clock.now, tlog, signing_key=signing_key, warn=say)
     pilot = SearchPilot(mission, policy, seed)
@@ -103,8 +103,8 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
 
     def draw(decision) -> None:
         path.append(tuple(pilot.state.position[0]))
-        if video_out is not None:
-            video_out.add(render_search(pilot.state, 0, path, float(pilot.zoom[0])))
+        if pictures is not None:
+            pictures.add(render_search(pilot.state, 0, path, float(pilot.zoom[0])))
 
     partial = PartialReport(out / REPORT if out is not None else None,
                             lambda: {**runner.report(), **run_facts, "tlog_messages": tlog.messages})
@@ -117,8 +117,8 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
     finally:
         if tlog is not None:
             tlog.close()
-        if video_out is not None:
-            video_out.close()
+        if pictures is not None:
+            pictures.close()
     report.update(run_facts)
     watch.settle()
     report["outcome"] = watch.outcome(report)

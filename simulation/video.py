@@ -14,21 +14,24 @@ VIDEO_FPS = 20
 
 
 class VideoRecorder:
-    """Frames (RGB) into an MP4 (OpenCV's mp4v codec); the last frame is also the trajectory PNG."""
+    """Frames (RGB) into an MP4 (OpenCV's mp4v codec); the last frame is also the trajectory PNG. With ``video``
+    False only the PNG is written."""
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, video: bool = True):
         self.folder = Path(folder)
+        self.video = video
         self._writer = None
         self.last_frame: np.ndarray | None = None
         self.frames = 0
 
     def add(self, rgb: np.ndarray) -> None:
         bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-        if self._writer is None:
-            height, width = bgr.shape[:2]
-            self._writer = cv2.VideoWriter(str(self.folder / VIDEO), cv2.VideoWriter_fourcc(*"mp4v"), VIDEO_FPS,
-                                           (width, height))
-        self._writer.write(bgr)
+        if self.video:
+            if self._writer is None:
+                height, width = bgr.shape[:2]
+                self._writer = cv2.VideoWriter(str(self.folder / VIDEO), cv2.VideoWriter_fourcc(*"mp4v"),
+                                               VIDEO_FPS, (width, height))
+            self._writer.write(bgr)
         self.last_frame = bgr
         self.frames += 1
 

@@ -164,6 +164,14 @@ def test_replays_of_the_same_mission_and_seed_are_byte_identical(policy, flown, 
     assert other["transitions"][-1]["to"] == "DONE"
 
 
+def test_a_replay_without_video_still_draws_its_trajectory(policy, flown, tmp_path):
+    """``video=False`` (``--no-video``) skips replay.mp4 only: trajectory.png is the video's last frame all the same."""
+    _, _, first = flown
+    replay_mission(small_mission(), policy, seed=5, out=tmp_path, video=False)
+    assert (first / "replay.mp4").exists() and not (tmp_path / "replay.mp4").exists()
+    assert (tmp_path / "trajectory.png").read_bytes() == (first / "trajectory.png").read_bytes()
+
+
 # ---------------------------------------------------------------------------------------- slow and broken policies
 def setpoints_during_search(report: dict, messages: list) -> list:
     start = next(t["time_s"] for t in report["transitions"] if t["to"] == "SEARCH")
