@@ -76,9 +76,11 @@ class RunnerCore:
 
     # ------------------------------------------------------------------ bookkeeping
     def _record(self, state: MissionState, reason: str) -> None:
+        """A transition to ``state``: recorded ("from" is None for the first) and said ("-> CONNECT: start")."""
         now = self.clock.now()
         self.transitions.append({"time_s": round(now, 3), "from": self.state, "to": state, "reason": reason})
-        self.say(f"[{now:8.2f} s] {self.state} -> {state}: {reason}")
+        origin = "" if self.state is None else f"{self.state} "
+        self.say(f"[{now:8.2f} s] {origin}-> {state}: {reason}")
         self.state = state
 
     def _event(self, kind: str, reason: str) -> None:

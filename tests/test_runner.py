@@ -265,6 +265,7 @@ def test_mission_replay_command_prints_a_summary_and_writes_the_report(policy, m
     assert f"small: {int(report['success'])}/1 searches found the victim" in result.stdout
     assert f"report: {tmp_path / 'report.json'}" in result.stdout
     assert "SEARCH -> RTL" in result.stdout  # the transitions, with their reasons
+    assert result.stdout.splitlines()[0] == "[    0.00 s] -> CONNECT: start" and "None" not in result.stdout
 
 
 def test_replays_of_many_episodes_show_their_progress_on_stderr_unless_quiet(policy, mission_file, tmp_path):
