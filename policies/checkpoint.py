@@ -16,9 +16,9 @@ import torch
 
 from autonomy.policy import one_line
 from missions.goals import GOAL_NAMES
-from policies.agents.discrete_sac import DiscreteSAC
+from policies.agents.discrete_sac import DiscreteSAC, DiscreteSacConfig
 from policies.agents.normalizer import RunningMeanStd
-from policies.agents.sac import SAC
+from policies.agents.sac import SAC, SacConfig
 from policies.config import TrainConfig
 from policies.env.core import ACTION_HIGH, ACTION_LOW
 
@@ -26,9 +26,10 @@ CHECKPOINT = "checkpoint.pt"
 """The checkpoint file of a run folder."""
 
 MOVED_MODULES = {"policies.env_core": "policies.env.core", "policies.ambiguous_env": "policies.env.task_v1",
-                 "policies.env.ambiguous": "policies.env.task_v1", "policies.env.baselines": "policies.env.baselines_v1",
-                 "missions.search_state": "missions.search_state_v0", "missions.belief_search": "missions.search_state_v1",
-                 "missions.signing": "mavlink_signing"}
+                 "policies.env.ambiguous": "policies.env.task_v1",
+                 "policies.env.baselines": "policies.env.baselines_v1",
+                 "missions.search_state": "missions.search_state_v0",
+                 "missions.belief_search": "missions.search_state_v1", "missions.signing": "mavlink_signing"}
 """Where the classes of a pickled environment live now, for checkpoints written with an earlier module layout (their
 pickles name the old modules)."""
 MOVED_CLASSES = {("policies.env.core", "SarSearchBatch"): "policies.env.task_v0"}
@@ -56,6 +57,19 @@ def dump_environment(core) -> bytes:
 def load_environment(pickled: bytes):
     """The environments' state pickled in a checkpoint (``"env"``), whichever module layout wrote it."""
     return _EnvironmentUnpickler(io.BytesIO(pickled)).load()
+
+
+def new_agents(config: TrainConfig) -> tuple[SAC, DiscreteSAC | None]:
+    """The agents a run with ``config`` starts from: the continuous SAC (HRL-SAC's low level, or the flat SAC) and,
+    for HRL-SAC, the meta-controller, each with its settings taken from ``config``."""
+    layout = config.layout
+    low = SAC(layout.dim, 4, ACTION_LOW, ACTION_HIGH, SacConfig.from_train_config(config), seed=config.seed,
+              input_mask=config.low_level_input_mask)
+    meta = None
+    if config.algo == "hrl-sac":
+        meta = DiscreteSAC(layout.meta_dim, len(GOAL_NAMES), DiscreteSacConfig.from_train_config(config),
+                           seed=config.seed + 1, input_mask=config.meta_input_mask)
+    return low, meta
 
 
 def checkpoint_file(path: Path | str) -> Path:
@@ -146,14 +160,8 @@ class CheckpointPolicy:
     @classmethod
     def untrained(cls, config: TrainConfig) -> "CheckpointPolicy":
         """The networks a run with ``config`` starts from and an identity normaliser (benchmarks, tests)."""
-        layout = config.layout
-        low = SAC(layout.dim, 4, ACTION_LOW, ACTION_HIGH, config, seed=config.seed,
-                  input_mask=config.low_level_input_mask)
-        meta = None
-        if config.algo == "hrl-sac":
-            meta = DiscreteSAC(layout.meta_dim, len(GOAL_NAMES), config, seed=config.seed + 1,
-                               input_mask=config.meta_input_mask)
-        return cls(config, RunningMeanStd((layout.dim,)), low, meta, 0, Path("untrained"))
+        low, meta = new_agents(config)
+        return cls(config, RunningMeanStd((config.layout.dim,)), low, meta, 0, Path("untrained"))
 
     @property
     def hierarchical(self) -> bool:

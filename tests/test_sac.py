@@ -3,6 +3,7 @@ tuning, target networks, determinism / checkpoints, and a small learning check."
 from __future__ import annotations
 
 import copy
+import dataclasses
 import io
 import math
 
@@ -13,10 +14,11 @@ from torch import nn
 from torch.distributions import Independent, Normal, TransformedDistribution
 from torch.distributions.transforms import TanhTransform
 
-from policies.agents.discrete_sac import DiscreteSAC
 from policies.agents.action_scaler import ActionScaler
+from policies.agents.discrete_sac import DiscreteSAC, DiscreteSacConfig
 from policies.agents.networks import CategoricalActor, SquashedGaussianActor, TwinQ, TwinQDiscrete, mlp
-from policies.agents.sac import SAC
+from policies.agents.replay_batch import ReplayBatch
+from policies.agents.sac import SAC, SacConfig
 from policies.config import NetworkConfig, TrainConfig
 
 ENV_LOW = np.array([-1.0, -1.0, 0.0, 0.0], dtype=np.float32)
@@ -28,6 +30,14 @@ HIGH2 = np.array([1.0, 1.0], dtype=np.float32)
 def small_config(dropout: float = 0.0, **overrides) -> TrainConfig:
     net = NetworkConfig(hidden=(32, 32), layer_norm=True, dropout=dropout)
     return TrainConfig(actor=net, critic=net, meta_actor=net, meta_critic=net, **overrides)
+
+
+def as_sac(config: TrainConfig) -> SacConfig:
+    return SacConfig.from_train_config(config)
+
+
+def as_meta(config: TrainConfig) -> DiscreteSacConfig:
+    return DiscreteSacConfig.from_train_config(config)
 
 
 def linear_shapes(module: nn.Module) -> list[tuple[int, int]]:
@@ -46,25 +56,34 @@ def constant_output(seq: nn.Sequential, value) -> None:
         last.bias.copy_(torch.as_tensor(value, dtype=torch.float32).expand_as(last.bias))
 
 
-def continuous_batch(rng: np.random.Generator, b: int, obs_dim: int = 3, low=LOW2, high=HIGH2, done=None) -> dict:
-    return {
-        "obs": rng.standard_normal((b, obs_dim)).astype(np.float32),
-        "action": rng.uniform(low, high, (b, len(low))).astype(np.float32),
-        "reward": rng.standard_normal(b).astype(np.float32),
-        "next_obs": rng.standard_normal((b, obs_dim)).astype(np.float32),
-        "done": (rng.random(b) < 0.3).astype(np.float32) if done is None else np.full(b, done, np.float32),
-    }
+def continuous_batch(rng: np.random.Generator, b: int, obs_dim: int = 3, low=LOW2, high=HIGH2, done=None
+                     ) -> ReplayBatch:
+    return ReplayBatch(
+        obs=rng.standard_normal((b, obs_dim)).astype(np.float32),
+        action=rng.uniform(low, high, (b, len(low))).astype(np.float32),
+        reward=rng.standard_normal(b).astype(np.float32),
+        next_obs=rng.standard_normal((b, obs_dim)).astype(np.float32),
+        done=(rng.random(b) < 0.3).astype(np.float32) if done is None else np.full(b, done, np.float32),
+    )
 
 
-def discrete_batch(rng: np.random.Generator, b: int, obs_dim: int = 3, n: int = 3) -> dict:
-    return {
-        "obs": rng.standard_normal((b, obs_dim)).astype(np.float32),
-        "action": rng.integers(0, n, b),
-        "reward": rng.standard_normal(b).astype(np.float32),
-        "next_obs": rng.standard_normal((b, obs_dim)).astype(np.float32),
-        "done": (rng.random(b) < 0.3).astype(np.float32),
-        "discount": (0.99 ** rng.integers(1, 31, b)).astype(np.float32),
-    }
+def discrete_batch(rng: np.random.Generator, b: int, obs_dim: int = 3, n: int = 3) -> ReplayBatch:
+    return ReplayBatch(
+        obs=rng.standard_normal((b, obs_dim)).astype(np.float32),
+        action=rng.integers(0, n, b),
+        reward=rng.standard_normal(b).astype(np.float32),
+        next_obs=rng.standard_normal((b, obs_dim)).astype(np.float32),
+        done=(rng.random(b) < 0.3).astype(np.float32),
+        discount=(0.99 ** rng.integers(1, 31, b)).astype(np.float32),
+    )
+
+
+def first_rows(batch: ReplayBatch, b: int) -> ReplayBatch:
+    return ReplayBatch(**{name: value[:b] for name, value in batch.stored_fields().items()})
+
+
+def weighted(batch: ReplayBatch, weights: np.ndarray) -> ReplayBatch:
+    return dataclasses.replace(batch, weights=weights)
 
 
 # ---------------------------------------------------------------------------------------------------- shapes
@@ -99,10 +118,10 @@ def test_paper_preset_network_shapes():
 
 def test_default_preset_has_no_dropout_and_agents_build_from_presets():
     cfg = TrainConfig.from_preset("default")
-    agent = SAC(276, 4, ENV_LOW, ENV_HIGH, cfg)
+    agent = SAC(276, 4, ENV_LOW, ENV_HIGH, as_sac(cfg))
     assert linear_shapes(agent.actor.trunk) == [(276, 256), (256, 256)]
     assert linear_shapes(agent.critic.q1) == [(280, 256), (256, 256), (256, 1)]
-    meta = DiscreteSAC(272, 4, cfg)
+    meta = DiscreteSAC(272, 4, as_meta(cfg))
     assert linear_shapes(meta.actor) == [(272, 256), (256, 256), (256, 4)]
     assert linear_shapes(meta.critic.q1) == [(276, 256), (256, 256), (256, 1)]
     for module in (agent.actor, agent.critic, meta.actor, meta.critic):
@@ -193,7 +212,7 @@ def test_action_scaler_round_trip_and_ranges():
     with pytest.raises(ValueError):
         ActionScaler([0.0, 1.0], [1.0, 1.0])
 
-    agent = SAC(6, 4, ENV_LOW, ENV_HIGH, small_config())
+    agent = SAC(6, 4, ENV_LOW, ENV_HIGH, as_sac(small_config()))
     actions = agent.act(np.random.default_rng(1).standard_normal((200, 6)).astype(np.float32) * 5)
     assert actions.shape == (200, 4) and actions.dtype == np.float32
     assert np.all(actions >= ENV_LOW) and np.all(actions <= ENV_HIGH)
@@ -223,7 +242,7 @@ def test_action_margin_widens_the_policy_range_and_clips_to_the_environment():
 
 
 def test_critics_judge_the_flown_action_under_an_action_margin(monkeypatch):
-    agent = SAC(3, 2, LOW2, HIGH2, small_config(action_margin=0.25))  # second dimension [0, 1] -> [-0.25, 1.25]
+    agent = SAC(3, 2, LOW2, HIGH2, as_sac(small_config(action_margin=0.25)))  # second dimension [0, 1] -> [-0.25, 1.25]
     seen = []
     for critic in (agent.critic, agent.critic_target):  # the update's passes (forward_with)
         forward = critic.forward_with
@@ -242,13 +261,13 @@ def test_critics_judge_the_flown_action_under_an_action_margin(monkeypatch):
     target_action, buffer_action, policy_action = seen  # soft target, the critics on the batch, the actor step
     torch.testing.assert_close(target_action, expected)
     torch.testing.assert_close(policy_action, expected)
-    torch.testing.assert_close(buffer_action, agent.scaler.to_unit(torch.from_numpy(batch["action"])))
+    torch.testing.assert_close(buffer_action, agent.scaler.to_unit(torch.from_numpy(batch.action)))
     actions = agent.act(np.zeros((1, 3), np.float32), deterministic=True)
     assert np.all(actions >= LOW2) and np.all(actions <= HIGH2)
 
 
 def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
-    agent = SAC(3, 2, LOW2, HIGH2, small_config(initial_alpha=0.5))
+    agent = SAC(3, 2, LOW2, HIGH2, as_sac(small_config(initial_alpha=0.5)))
     constant_output(agent.critic_target.q1, 4.0)
     constant_output(agent.critic_target.q2, 1.5)  # min Q' = 1.5
     constant_output(agent.critic.q1, 0.25)
@@ -259,18 +278,18 @@ def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
         return torch.tanh(mean) * 0.0, obs[:, 0] + 0.0 * log_std.sum(-1)
 
     monkeypatch.setattr(agent.actor, "sample", fake_sample)
-    batch = {
-        "obs": np.zeros((4, 3), np.float32),
-        "action": np.array([[0.0, 0.5], [1.0, 1.0], [-1.0, 0.0], [0.2, 0.3]], np.float32),
-        "reward": np.array([1.0, -2.0, 0.5, 3.0], np.float32),
-        "next_obs": np.array([[-1.0, 0, 0], [2.0, 0, 0], [0.5, 0, 0], [-3.0, 0, 0]], np.float32),
-        "done": np.array([0.0, 0.0, 1.0, 0.0], np.float32),
-        "discount": np.array([0.99, 0.5, 0.9, 0.0], np.float32),
-    }
-    log_pi_next = batch["next_obs"][:, 0].astype(np.float64)
-    expected = batch["reward"] + batch["discount"] * (1 - batch["done"]) * (1.5 - 0.5 * log_pi_next)
-    y = agent.soft_q_target(torch.from_numpy(batch["reward"]), torch.from_numpy(batch["next_obs"]),
-                            torch.from_numpy(batch["done"]), torch.from_numpy(batch["discount"]), torch.tensor(0.5))
+    batch = ReplayBatch(
+        obs=np.zeros((4, 3), np.float32),
+        action=np.array([[0.0, 0.5], [1.0, 1.0], [-1.0, 0.0], [0.2, 0.3]], np.float32),
+        reward=np.array([1.0, -2.0, 0.5, 3.0], np.float32),
+        next_obs=np.array([[-1.0, 0, 0], [2.0, 0, 0], [0.5, 0, 0], [-3.0, 0, 0]], np.float32),
+        done=np.array([0.0, 0.0, 1.0, 0.0], np.float32),
+        discount=np.array([0.99, 0.5, 0.9, 0.0], np.float32),
+    )
+    log_pi_next = batch.next_obs[:, 0].astype(np.float64)
+    expected = batch.reward + batch.discount * (1 - batch.done) * (1.5 - 0.5 * log_pi_next)
+    y = agent.soft_q_target(torch.from_numpy(batch.reward), torch.from_numpy(batch.next_obs),
+                            torch.from_numpy(batch.done), torch.from_numpy(batch.discount), torch.tensor(0.5))
     np.testing.assert_allclose(y.numpy(), expected, rtol=1e-6)
 
     td, metrics = agent.update(batch)
@@ -279,21 +298,21 @@ def test_continuous_soft_bellman_target_with_done_and_discount(monkeypatch):
                                np.mean((0.25 - expected) ** 2 + (-0.75 - expected) ** 2), rtol=1e-5)
     assert metrics["q_mean"] == pytest.approx(-0.25) and metrics["alpha"] == pytest.approx(0.5)
 
-    # Without "discount" the config's discount of this SAC is used (HRL-SAC's low level here: low_level_gamma).
-    assert agent.config.algo == "hrl-sac" and agent.gamma == agent.config.low_level_gamma == 0.95
-    del batch["discount"]
+    # Without a discount the config's discount of this SAC is used (HRL-SAC's low level here: low_level_gamma).
+    assert agent.gamma == agent.config.gamma == small_config().low_level_gamma == 0.95
+    batch.discount = None
     constant_output(agent.critic.q1, 0.25)
     constant_output(agent.critic.q2, -0.75)
     constant_output(agent.critic_target.q1, 4.0)
     constant_output(agent.critic_target.q2, 1.5)
     alpha = agent.alpha
-    expected = batch["reward"] + 0.95 * (1 - batch["done"]) * (1.5 - alpha * log_pi_next)
+    expected = batch.reward + 0.95 * (1 - batch.done) * (1.5 - alpha * log_pi_next)
     td, _ = agent.update(batch)
     np.testing.assert_allclose(td, 0.5 * (np.abs(0.25 - expected) + np.abs(-0.75 - expected)), rtol=1e-5)
 
 
 def test_discrete_soft_value_target_and_actor_loss_by_hand(monkeypatch):
-    agent = DiscreteSAC(3, 3, small_config(initial_alpha=0.3))
+    agent = DiscreteSAC(3, 3, as_meta(small_config(initial_alpha=0.3)))
     logits = np.array([0.5, -1.0, 2.0])
     constant_output(agent.actor.net, logits)  # the same policy in every state
     pi = np.exp(logits) / np.exp(logits).sum()
@@ -319,11 +338,11 @@ def test_discrete_soft_value_target_and_actor_loss_by_hand(monkeypatch):
     torch.testing.assert_close(agent.soft_value(torch.zeros(2, 3), torch.tensor(alpha)),
                                torch.tensor(v_next, dtype=torch.float32))
 
-    batch = {"obs": np.zeros((2, 3), np.float32), "action": np.array([2, 0]),
-             "reward": np.array([1.0, -0.5], np.float32), "next_obs": np.zeros((2, 3), np.float32),
-             "done": np.array([0.0, 1.0], np.float32), "discount": np.array([0.99 ** 30, 0.99 ** 7], np.float32)}
+    batch = ReplayBatch(obs=np.zeros((2, 3), np.float32), action=np.array([2, 0]),
+                        reward=np.array([1.0, -0.5], np.float32), next_obs=np.zeros((2, 3), np.float32),
+                        done=np.array([0.0, 1.0], np.float32), discount=np.array([0.99 ** 30, 0.99 ** 7], np.float32))
     np.testing.assert_allclose(agent.probabilities(np.zeros((1, 3), np.float32))[0], pi, rtol=1e-5)
-    y = batch["reward"] + batch["discount"] * (1 - batch["done"]) * v_next
+    y = batch.reward + batch.discount * (1 - batch.done) * v_next
     td, metrics = agent.update(batch)
     np.testing.assert_allclose(td, 0.5 * (np.abs(0.7 - y) + np.abs(-0.2 - y)), rtol=1e-5)
     actor_loss = np.mean((pi * (alpha * log_pi - np.minimum(q1_now, q2_now))).sum(-1))
@@ -337,32 +356,32 @@ def test_per_weights_scale_the_critic_loss():
     b = 16
     # done = 1: y = r exactly, so the targets do not depend on how much policy noise a batch size draws.
     batch = continuous_batch(rng, 2 * b, done=1.0)
-    half = {key: value[:b] for key, value in batch.items()}
+    half = first_rows(batch, b)
     cfg = small_config()
-    full, first_half, halved, plain = (SAC(3, 2, LOW2, HIGH2, cfg, seed=5) for _ in range(4))
+    full, first_half, halved, plain = (SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=5) for _ in range(4))
 
-    td_full, m_full = full.update(batch, np.r_[np.full(b, 2.0), np.zeros(b)].astype(np.float32))
+    td_full, m_full = full.update(weighted(batch, np.r_[np.full(b, 2.0), np.zeros(b)].astype(np.float32)))
     td_half, m_half = first_half.update(half)
     assert m_full["critic_loss"] == pytest.approx(m_half["critic_loss"], rel=1e-6)
     np.testing.assert_allclose(td_full[:b], td_half, rtol=1e-6)
     for p_full, p_half in zip(full.critic.parameters(), first_half.critic.parameters()):  # same gradient
         torch.testing.assert_close(p_full, p_half, rtol=1e-4, atol=1e-6)
 
-    _, m_halved = halved.update(batch, np.full(2 * b, 0.5, np.float32))
+    _, m_halved = halved.update(weighted(batch, np.full(2 * b, 0.5, np.float32)))
     _, m_plain = plain.update(batch)
     assert m_halved["critic_loss"] == pytest.approx(0.5 * m_plain["critic_loss"], rel=1e-6)
 
-    meta_full, meta_half = DiscreteSAC(3, 3, cfg, seed=2), DiscreteSAC(3, 3, cfg, seed=2)
+    meta_full, meta_half = DiscreteSAC(3, 3, as_meta(cfg), seed=2), DiscreteSAC(3, 3, as_meta(cfg), seed=2)
     dbatch = discrete_batch(rng, 2 * b)
-    _, m1 = meta_full.update(dbatch, np.r_[np.full(b, 2.0), np.zeros(b)].astype(np.float32))
-    _, m2 = meta_half.update({key: value[:b] for key, value in dbatch.items()})
+    _, m1 = meta_full.update(weighted(dbatch, np.r_[np.full(b, 2.0), np.zeros(b)].astype(np.float32)))
+    _, m2 = meta_half.update(first_rows(dbatch, b))
     assert m1["critic_loss"] == pytest.approx(m2["critic_loss"], rel=1e-5)
 
 
 # ---------------------------------------------------------------------------------------------------- temperature
 @pytest.mark.parametrize("target_entropy, grows", [(50.0, True), (-50.0, False)])
 def test_continuous_alpha_moves_toward_target_entropy(target_entropy, grows):
-    agent = SAC(3, 2, LOW2, HIGH2, small_config(target_entropy=target_entropy))
+    agent = SAC(3, 2, LOW2, HIGH2, as_sac(small_config(target_entropy=target_entropy)))
     rng = np.random.default_rng(0)
     start = agent.alpha
     for _ in range(5):
@@ -372,7 +391,7 @@ def test_continuous_alpha_moves_toward_target_entropy(target_entropy, grows):
 
 @pytest.mark.parametrize("logits, grows", [([6.0, 0.0, 0.0], True), ([0.0, 0.0, 0.0], False)])
 def test_discrete_alpha_moves_toward_target_entropy(logits, grows):
-    agent = DiscreteSAC(3, 3, small_config())  # target 0.89 log 3: peaked policy below, uniform above
+    agent = DiscreteSAC(3, 3, as_meta(small_config()))  # target 0.89 log 3: peaked policy below, uniform above
     constant_output(agent.actor.net, logits)
     rng = np.random.default_rng(0)
     start = agent.alpha
@@ -385,7 +404,7 @@ def test_meta_alpha_never_below_floor():
     # A uniform policy held fixed (actor learning rate 0): H = log 3 stays above the target 0.89 log 3, so
     # alpha keeps shrinking -- onto the floor, and no further.
     cfg = small_config(initial_alpha=1.5e-3, meta_min_alpha=1e-3, learning_rate=0.05)
-    agent = DiscreteSAC(3, 3, cfg)
+    agent = DiscreteSAC(3, 3, as_meta(cfg))
     constant_output(agent.actor.net, [0.0, 0.0, 0.0])
     agent.actor_optim.param_groups[0]["lr"] = 0.0
     rng = np.random.default_rng(0)
@@ -394,14 +413,14 @@ def test_meta_alpha_never_below_floor():
         assert metrics["entropy"] == pytest.approx(math.log(3))
         assert agent.alpha >= 1e-3 and metrics["alpha"] >= 1e-3
     assert agent.alpha == pytest.approx(1e-3, rel=1e-6)
-    assert DiscreteSAC(3, 3, small_config(initial_alpha=1e-5, meta_min_alpha=1e-3)).alpha >= 1e-3
+    assert DiscreteSAC(3, 3, as_meta(small_config(initial_alpha=1e-5, meta_min_alpha=1e-3))).alpha >= 1e-3
 
 
 # ---------------------------------------------------------------------------------------------------- targets move
 def test_target_critics_move_by_tau():
     rng = np.random.default_rng(2)
-    for agent, batch in ((SAC(3, 2, LOW2, HIGH2, small_config(tau=0.1)), continuous_batch(rng, 16)),
-                         (DiscreteSAC(3, 3, small_config(tau=0.1)), discrete_batch(rng, 16))):
+    for agent, batch in ((SAC(3, 2, LOW2, HIGH2, as_sac(small_config(tau=0.1))), continuous_batch(rng, 16)),
+                         (DiscreteSAC(3, 3, as_meta(small_config(tau=0.1))), discrete_batch(rng, 16))):
         agent.update(batch)  # online and target differ from here on
         before = [p.clone() for p in agent.critic_target.parameters()]
         agent.update(batch)
@@ -415,7 +434,7 @@ def test_target_critics_move_by_tau():
 # ---------------------------------------------------------------------------------------------------- determinism
 def test_deterministic_act_is_repeatable_in_eval_mode_paper_preset():
     cfg = TrainConfig.from_preset("paper")
-    agent = SAC(276, 4, ENV_LOW, ENV_HIGH, cfg, seed=3)
+    agent = SAC(276, 4, ENV_LOW, ENV_HIGH, as_sac(cfg), seed=3)
     obs = np.random.default_rng(0).standard_normal((5, 276)).astype(np.float32)
     first, second = agent.act(obs, deterministic=True), agent.act(obs, deterministic=True)
     np.testing.assert_array_equal(first, second)
@@ -424,9 +443,10 @@ def test_deterministic_act_is_repeatable_in_eval_mode_paper_preset():
         assert not torch.equal(agent.actor.deterministic(torch.from_numpy(obs)),
                                agent.actor.deterministic(torch.from_numpy(obs)))
     assert not np.array_equal(agent.act(obs), agent.act(obs))  # stochastic: fresh noise per call
-    np.testing.assert_array_equal(SAC(276, 4, ENV_LOW, ENV_HIGH, cfg, seed=3).act(obs, deterministic=True), first)
+    again = SAC(276, 4, ENV_LOW, ENV_HIGH, as_sac(cfg), seed=3)
+    np.testing.assert_array_equal(again.act(obs, deterministic=True), first)
 
-    meta = DiscreteSAC(272, 4, cfg, seed=3)
+    meta = DiscreteSAC(272, 4, as_meta(cfg), seed=3)
     meta_obs = obs[:, :272]
     np.testing.assert_array_equal(meta.act(meta_obs, deterministic=True), meta.act(meta_obs, deterministic=True))
     np.testing.assert_array_equal(meta.probabilities(meta_obs), meta.probabilities(meta_obs))
@@ -439,13 +459,13 @@ def test_deterministic_act_is_repeatable_in_eval_mode_paper_preset():
 def test_seeded_and_leaves_global_rng_alone():
     outer = torch.get_rng_state()
     cfg = small_config(dropout=0.1)
-    a, b, c = (SAC(3, 2, LOW2, HIGH2, cfg, seed=s) for s in (1, 1, 2))
+    a, b, c = (SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=s) for s in (1, 1, 2))
     batch = continuous_batch(np.random.default_rng(0), 8)
     a.update(batch)
-    a.act(batch["obs"])
-    DiscreteSAC(3, 3, cfg, seed=1).update(discrete_batch(np.random.default_rng(0), 8))
+    a.act(batch.obs)
+    DiscreteSAC(3, 3, as_meta(cfg), seed=1).update(discrete_batch(np.random.default_rng(0), 8))
     assert torch.equal(torch.get_rng_state(), outer)
-    assert torch.equal(b.actor.mean.weight, SAC(3, 2, LOW2, HIGH2, cfg, seed=1).actor.mean.weight)
+    assert torch.equal(b.actor.mean.weight, SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=1).actor.mean.weight)
     assert not torch.equal(b.actor.mean.weight, c.actor.mean.weight)
 
 
@@ -462,11 +482,11 @@ def test_state_dict_round_trip_gives_bit_identical_next_update(kind):
     cfg = small_config(dropout=0.1)  # dropout: the restored agent must also draw the same masks
     if kind == "sac":
         def make(seed):
-            return SAC(3, 2, LOW2, HIGH2, cfg, seed=seed)
+            return SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=seed)
         batches = [continuous_batch(rng, 16) for _ in range(3)]
     else:
         def make(seed):
-            return DiscreteSAC(3, 3, cfg, seed=seed)
+            return DiscreteSAC(3, 3, as_meta(cfg), seed=seed)
         batches = [discrete_batch(rng, 16) for _ in range(3)]
     original = make(0)
     original.update(batches[0])
@@ -478,8 +498,8 @@ def test_state_dict_round_trip_gives_bit_identical_next_update(kind):
     restored.load_state_dict(torch.load(buffer))
     _assert_same_agents(original, restored)
 
-    td_a, metrics_a = original.update(batches[2], np.linspace(0.5, 1.0, 16).astype(np.float32))
-    td_b, metrics_b = restored.update(batches[2], np.linspace(0.5, 1.0, 16).astype(np.float32))
+    td_a, metrics_a = original.update(weighted(batches[2], np.linspace(0.5, 1.0, 16).astype(np.float32)))
+    td_b, metrics_b = restored.update(weighted(batches[2], np.linspace(0.5, 1.0, 16).astype(np.float32)))
     assert metrics_a == metrics_b
     np.testing.assert_array_equal(td_a, td_b)
     _assert_same_agents(original, restored)
@@ -487,7 +507,7 @@ def test_state_dict_round_trip_gives_bit_identical_next_update(kind):
         state_a, state_b = getattr(original, opt).state_dict()["state"], getattr(restored, opt).state_dict()["state"]
         for key in state_a:
             assert torch.equal(state_a[key]["exp_avg_sq"], state_b[key]["exp_avg_sq"])
-    np.testing.assert_array_equal(original.act(batches[0]["obs"]), restored.act(batches[0]["obs"]))
+    np.testing.assert_array_equal(original.act(batches[0].obs), restored.act(batches[0].obs))
     assert original.num_updates == restored.num_updates == 3
 
     snapshot = copy.deepcopy(original.state_dict())  # a deep copy is a snapshot; continuing does not change it
@@ -496,18 +516,18 @@ def test_state_dict_round_trip_gives_bit_identical_next_update(kind):
 
 
 def test_batch_shapes_are_checked():
-    agent = SAC(3, 2, LOW2, HIGH2, small_config())
+    agent = SAC(3, 2, LOW2, HIGH2, as_sac(small_config()))
     batch = continuous_batch(np.random.default_rng(0), 8)
     with pytest.raises(ValueError, match="reward"):
-        agent.update({**batch, "reward": batch["reward"][:, None]})
+        agent.update(dataclasses.replace(batch, reward=batch.reward[:, None]))
     with pytest.raises(ValueError, match="weights"):
-        agent.update(batch, np.ones((8, 1), np.float32))
-    meta = DiscreteSAC(3, 3, small_config())
+        agent.update(weighted(batch, np.ones((8, 1), np.float32)))
+    meta = DiscreteSAC(3, 3, as_meta(small_config()))
     dbatch = discrete_batch(np.random.default_rng(0), 8)
     with pytest.raises(ValueError, match="discount"):
-        meta.update({key: value for key, value in dbatch.items() if key != "discount"})
+        meta.update(dataclasses.replace(dbatch, discount=None))
     with pytest.raises(ValueError, match="action"):
-        meta.update({**dbatch, "action": np.full(8, 3)})
+        meta.update(dataclasses.replace(dbatch, action=np.full(8, 3)))
 
 
 # ---------------------------------------------------------------------------------------------------- learning
@@ -516,13 +536,13 @@ def test_sac_learns_a_one_step_bandit():
     a_star = np.array([0.4, 0.8], np.float32)  # env range, low = [-1, 0], high = [1, 1]
     net = NetworkConfig(hidden=(64, 64), layer_norm=True)
     cfg = TrainConfig(actor=net, critic=net, learning_rate=1e-3, initial_alpha=0.05)
-    agent = SAC(3, 2, LOW2, HIGH2, cfg, seed=0)
+    agent = SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=0)
     rng = np.random.default_rng(0)
     state = np.tile(np.array([0.5, -1.0, 2.0], np.float32), (128, 1))
     for _ in range(1000):
         batch = continuous_batch(rng, 128, done=1.0)  # uniform random actions, as from the warm-up
-        batch["obs"] = batch["next_obs"] = state
-        batch["reward"] = -((batch["action"] - a_star) ** 2).sum(-1).astype(np.float32)
+        batch.obs = batch.next_obs = state
+        batch.reward = -((batch.action - a_star) ** 2).sum(-1).astype(np.float32)
         agent.update(batch)
     action = agent.act(state[0], deterministic=True)
     assert np.abs(action - a_star).max() < 0.1, action
@@ -530,9 +550,10 @@ def test_sac_learns_a_one_step_bandit():
 
 
 def test_the_low_level_and_flat_sac_discount_by_their_own_gamma():
-    assert SAC(3, 2, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), small_config(algo="sac"), seed=0).gamma == 0.99
+    low, high = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    assert SAC(3, 2, low, high, as_sac(small_config(algo="sac")), seed=0).gamma == 0.99
     hrl = small_config(algo="hrl-sac", low_level_gamma=0.9)
-    assert SAC(3, 2, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), hrl, seed=0).gamma == 0.9
+    assert SAC(3, 2, low, high, as_sac(hrl), seed=0).gamma == 0.9
     assert TrainConfig.from_preset("paper").sac_gamma == 0.99  # the paper's table
     with pytest.raises(ValueError, match="TrainConfig.low_level_gamma must be a number in"):
         TrainConfig(low_level_gamma=1.5)
@@ -544,7 +565,7 @@ def test_bfloat16_updates_keep_float32_outputs_and_track_the_float32_update():
     weights stay float32, the step is close to the float32 one (not equal), and the bandit is still learned."""
     rng = np.random.default_rng(3)
     batch = continuous_batch(rng, 64)
-    agents = {dtype: SAC(3, 2, LOW2, HIGH2, small_config(update_dtype=dtype), seed=0) for dtype in ("float32",
+    agents = {dtype: SAC(3, 2, LOW2, HIGH2, as_sac(small_config(update_dtype=dtype)), seed=0) for dtype in ("float32",
                                                                                                   "bfloat16")}
     results = {dtype: agent.update(batch) for dtype, agent in agents.items()}
     td32, td16 = results["float32"][0], results["bfloat16"][0]
@@ -564,11 +585,11 @@ def test_bfloat16_updates_are_reproducible_and_resume_bit_identically():
     rng = np.random.default_rng(5)
     batches = [continuous_batch(rng, 16) for _ in range(3)]
     cfg = small_config(update_dtype="bfloat16")
-    a, b = SAC(3, 2, LOW2, HIGH2, cfg, seed=1), SAC(3, 2, LOW2, HIGH2, cfg, seed=1)
+    a, b = SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=1), SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=1)
     for batch in batches[:2]:
         a.update(batch)
         b.update(batch)
-    restored = SAC(3, 2, LOW2, HIGH2, cfg, seed=2)
+    restored = SAC(3, 2, LOW2, HIGH2, as_sac(cfg), seed=2)
     restored.load_state_dict(copy.deepcopy(a.state_dict()))
     outcomes = [agent.update(batches[2]) for agent in (a, b, restored)]
     for td, metrics in outcomes[1:]:
@@ -614,7 +635,7 @@ def test_unknown_ignored_field_is_refused_with_the_field_names():
 
 def test_masked_inputs_change_no_output_and_get_no_gradient():
     keep = np.array([1, 0, 1, 0, 1, 1], dtype=np.float32)
-    agent = SAC(6, 4, ENV_LOW, ENV_HIGH, small_config(), seed=1, input_mask=keep)
+    agent = SAC(6, 4, ENV_LOW, ENV_HIGH, as_sac(small_config()), seed=1, input_mask=keep)
     rng = np.random.default_rng(0)
     obs = rng.standard_normal((16, 6)).astype(np.float32)
     other = obs.copy()
@@ -640,7 +661,7 @@ def test_the_meta_controller_can_ignore_fields_and_only_known_ones():
     mask = config.meta_input_mask
     assert mask.shape == (LAYOUT_V4.meta_dim,) and mask[LAYOUT_V4.by_name["belief"].slice].sum() == 0
     assert mask.sum() == LAYOUT_V4.meta_dim - 256 and TrainConfig().meta_input_mask is None
-    meta = DiscreteSAC(LAYOUT_V4.meta_dim, 4, config, seed=2, input_mask=mask)
+    meta = DiscreteSAC(LAYOUT_V4.meta_dim, 4, as_meta(config), seed=2, input_mask=mask)
     rng = np.random.default_rng(0)
     obs = rng.standard_normal((8, LAYOUT_V4.meta_dim)).astype(np.float32)
     other = obs.copy()

@@ -11,18 +11,19 @@ import pytest
 import torch
 
 from policies.agents.networks import ActionGradientOnly, UpdateWeights
+from policies.agents.replay_batch import ReplayBatch
+from policies.agents.sac import SAC, SacConfig
 from policies.agents.shared import polyak_update
-from policies.agents.sac import SAC
 from policies.config import NetworkConfig, TrainConfig
 from policies.env.core import ACTION_HIGH, ACTION_LOW
 
 NET = NetworkConfig(hidden=(48, 40), head=24, dropout=0.1)  # every layer kind: LayerNorm, Dropout, the head
 
 
-def autocast_update(agent: SAC, batch: dict, weights: np.ndarray) -> tuple[np.ndarray, list[float]]:
+def autocast_update(agent: SAC, batch: ReplayBatch) -> tuple[np.ndarray, list[float]]:
     """The update as it was: the forward passes under ``torch.autocast`` in bfloat16 (or none in float32) through the
     networks' ``forward``, the critics frozen for the actor step by ``requires_grad_(False)``."""
-    obs, action, reward, next_obs, done, discount, w = agent._tensors(batch, weights)
+    obs, action, reward, next_obs, done, discount, w = agent._tensors(batch)
     action = agent.scaler.to_unit(action)
     bf16 = agent.config.update_dtype == "bfloat16"
     precision = (lambda: torch.autocast("cpu", dtype=torch.bfloat16)) if bf16 else contextlib.nullcontext
@@ -52,20 +53,21 @@ def test_update_equals_the_autocast_update_bit_for_bit(dtype, algo):
     config = TrainConfig.from_preset("default", algo=algo, update_dtype=dtype, actor=NET, critic=NET, batch_size=32,
                                      action_margin=0.25)
     dim, mask = config.layout.dim, config.low_level_input_mask
-    agents = [SAC(dim, 4, ACTION_LOW, ACTION_HIGH, config, seed=7, input_mask=mask) for _ in range(2)]
+    agents = [SAC(dim, 4, ACTION_LOW, ACTION_HIGH, SacConfig.from_train_config(config), seed=7, input_mask=mask)
+              for _ in range(2)]
     rng = np.random.default_rng(0)
     for _ in range(6):
-        batch = {"obs": rng.standard_normal((32, dim)).astype(np.float32),
-                 "action": rng.uniform(ACTION_LOW, ACTION_HIGH, (32, 4)).astype(np.float32),
-                 "reward": rng.standard_normal(32).astype(np.float32),
-                 "next_obs": rng.standard_normal((32, dim)).astype(np.float32),
-                 "done": (rng.random(32) < 0.2).astype(np.float32)}
-        weights = rng.uniform(0.5, 1.0, 32).astype(np.float32)
-        td, metrics = agents[0].update(batch, weights)
-        td_oracle, losses = autocast_update(agents[1], batch, weights)
+        batch = ReplayBatch(obs=rng.standard_normal((32, dim)).astype(np.float32),
+                            action=rng.uniform(ACTION_LOW, ACTION_HIGH, (32, 4)).astype(np.float32),
+                            reward=rng.standard_normal(32).astype(np.float32),
+                            next_obs=rng.standard_normal((32, dim)).astype(np.float32),
+                            done=(rng.random(32) < 0.2).astype(np.float32))
+        batch.weights = rng.uniform(0.5, 1.0, 32).astype(np.float32)
+        td, metrics = agents[0].update(batch)
+        td_oracle, losses = autocast_update(agents[1], batch)
         np.testing.assert_array_equal(td, td_oracle)
         assert [metrics["critic_loss"], metrics["actor_loss"], metrics["alpha_loss"]] == losses
-        np.testing.assert_array_equal(agents[0].act(batch["obs"][:3]), agents[1].act(batch["obs"][:3]))
+        np.testing.assert_array_equal(agents[0].act(batch.obs[:3]), agents[1].act(batch.obs[:3]))
     for name in ("actor", "critic", "critic_target"):
         for (key, a), b in zip(getattr(agents[0], name).state_dict().items(),
                                getattr(agents[1], name).state_dict().values()):
@@ -116,7 +118,8 @@ def test_update_weights_recast_after_a_change_and_pass_gradients_to_float32():
 
 
 def test_acting_draws_the_action_that_sample_draws():
-    agent = SAC(5, 4, ACTION_LOW, ACTION_HIGH, TrainConfig.from_preset("default", actor=NET, critic=NET), seed=2)
+    config = SacConfig.from_train_config(TrainConfig.from_preset("default", actor=NET, critic=NET))
+    agent = SAC(5, 4, ACTION_LOW, ACTION_HIGH, config, seed=2)
     obs = torch.randn(3, 5)
     state = agent.generator.get_state()
     with torch.no_grad():

@@ -8,78 +8,94 @@ update (see :meth:`DiscreteSAC.update`)::
     y     = r + discount * (1 - done) * V(s')         r = K-step discounted return, discount = meta_gamma^k
     critic loss = mean(w * ((Q1(s, a) - y)^2 + (Q2(s, a) - y)^2))
     actor loss  = mean_s sum_a pi(a|s) [alpha log pi(a|s) - min_j Q_j(s, a)]
-    alpha loss  = mean_s log_alpha * (H(pi(.|s)) - target_entropy);  then log_alpha >= log(meta_min_alpha)
+    alpha loss  = mean_s log_alpha * (H(pi(.|s)) - target_entropy);  then log_alpha >= log(min_alpha)
     Q'_j <- Q'_j + tau * (Q_j - Q'_j)
 
-The critics take the state and the goal's one-hot (the paper's 272 + 4 = 276 inputs) and return a scalar;
-``TwinQDiscrete.all_actions`` evaluates all goals in one batched pass. The target entropy is
-``meta_target_entropy_scale * log(n_actions)`` (entropies of a discrete policy are >= 0, unlike the
-continuous -|A|) and the temperature has a floor, two guards against a meta-policy that collapses onto one goal.
-Randomness, dropout, eval mode and checkpoints follow the same conventions as :mod:`policies.agents.sac`.
+The critics take the meta observation and the goal's one-hot and return a scalar; ``TwinQDiscrete.all_actions``
+evaluates all goals in one batched pass. The target entropy is ``target_entropy_scale * log(n_actions)``
+(entropies of a discrete policy are >= 0, unlike the continuous -|A|) and the temperature has a floor, two guards
+against a meta-policy that collapses onto one goal. Dropout and eval mode follow the conventions of
+:mod:`policies.agents.sac`; randomness, checkpoints and the rest the two agents share:
+:mod:`policies.agents.off_policy`.
 """
 from __future__ import annotations
 
-import copy
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from policies.config import TrainConfig
-from policies.agents.adam import adam_step, fused_adam, zero_grads
+from policies.agents.adam import adam_step, zero_grads
 from policies.agents.networks import CategoricalActor, TwinQDiscrete
-from policies.agents.shared import CheckpointedAgent, PrivateTorchRNG, as_float_tensor, derive_seeds, polyak_update
+from policies.agents.off_policy import OffPolicyAgent
+from policies.agents.replay_batch import ReplayBatch
+from policies.config import NetworkConfig, TrainConfig
 
-METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
+
+@dataclass(frozen=True)
+class DiscreteSacConfig:
+    """The settings of one discrete SAC; :meth:`from_train_config` takes them from a run's ``TrainConfig``, which
+    holds their defaults and checks their ranges."""
+
+    actor: NetworkConfig
+    """The actor's hidden layers (observation -> hidden -> one logit per action)."""
+    critic: NetworkConfig
+    """Each critic's hidden layers (observation and the action's one-hot -> hidden -> Q)."""
+    learning_rate: float
+    """Adam's learning rate of the actor, the critics and the temperature."""
+    tau: float
+    """Polyak rate of the target critics."""
+    initial_alpha: float
+    """The temperature before the first update (raised to ``min_alpha`` if below)."""
+    target_entropy_scale: float
+    """The entropy target as a share of the largest entropy, log(n_actions): high enough that the policy keeps
+    every action in use."""
+    min_alpha: float
+    """Floor on the temperature, a second guard against a policy that collapses onto one action."""
+
+    @classmethod
+    def from_train_config(cls, config: TrainConfig) -> DiscreteSacConfig:
+        """HRL-SAC's meta-controller of a run (the ``meta_*`` settings)."""
+        return cls(actor=config.meta_actor, critic=config.meta_critic, learning_rate=config.learning_rate,
+                   tau=config.tau, initial_alpha=config.initial_alpha,
+                   target_entropy_scale=config.meta_target_entropy_scale, min_alpha=config.meta_min_alpha)
 
 
-class DiscreteSAC(CheckpointedAgent):
+class DiscreteSAC(OffPolicyAgent):
     """Discrete SAC with twin critics on (state, one-hot action), target critics and a floored temperature.
 
     Args:
-        obs_dim: meta observation size (272).
+        obs_dim: meta observation size (the task's layout: 284 on SarSearch-v1, 272 on SarSearch-v0).
         n_actions: number of goals (4).
-        config: ``meta_actor`` / ``meta_critic`` networks, ``learning_rate``, ``tau``, ``initial_alpha``,
-            ``meta_target_entropy_scale`` and ``meta_min_alpha`` are used.
+        config: the settings (:class:`DiscreteSacConfig`).
         seed: the only source of randomness (network init, goal sampling, dropout masks).
+        input_mask: (obs_dim,) 0 / 1, the observation features the networks see; None: all of them.
     """
 
-    def __init__(self, obs_dim: int, n_actions: int, config: TrainConfig, seed: int = 0,
+    def __init__(self, obs_dim: int, n_actions: int, config: DiscreteSacConfig, seed: int = 0,
                  input_mask: np.ndarray | None = None):
         if n_actions < 2:
             raise ValueError(f"n_actions must be at least 2, got {n_actions}")
-        self.config = config
-        self.obs_dim, self.n_actions = int(obs_dim), int(n_actions)
-        self.tau = float(config.tau)
-        self.target_entropy = float(config.meta_target_entropy_scale * math.log(n_actions))
-        self.min_alpha = float(config.meta_min_alpha)
+        self.n_actions = int(n_actions)
+        self.target_entropy = float(config.target_entropy_scale * math.log(n_actions))
+        self.min_alpha = float(config.min_alpha)
         self._min_log_alpha = math.log(self.min_alpha)
+        super().__init__(obs_dim, config, seed, input_mask)
 
-        init_seed, sample_seed, dropout_seed = derive_seeds(seed, 3)
-        with torch.random.fork_rng(devices=[]):  # initialise from our seed, leave the global RNG as it was
-            torch.manual_seed(init_seed)
-            self.actor = CategoricalActor(obs_dim, n_actions, config.meta_actor, input_mask)
-            self.critic = TwinQDiscrete(obs_dim, n_actions, config.meta_critic, input_mask)
-        self.critic_target = copy.deepcopy(self.critic).eval().requires_grad_(False)
-        initial = max(math.log(config.initial_alpha), self._min_log_alpha)
-        self.log_alpha = torch.tensor(initial, dtype=torch.float32, requires_grad=True)
+    def _build_networks(self, input_mask: np.ndarray | None) -> tuple[CategoricalActor, TwinQDiscrete]:
+        cfg = self.config
+        return (CategoricalActor(self.obs_dim, self.n_actions, cfg.actor, input_mask),
+                TwinQDiscrete(self.obs_dim, self.n_actions, cfg.critic, input_mask))
 
-        lr = config.learning_rate
-        self.actor_optim = fused_adam(self.actor.parameters(), lr)  # stepped by adam_step, as in policies.agents.sac
-        self.critic_optim = fused_adam(self.critic.parameters(), lr)
-        self.alpha_optim = torch.optim.Adam([self.log_alpha], lr=lr)
-
-        self.generator = torch.Generator().manual_seed(sample_seed)  # goal sampling in act()
-        self.dropout_rng = PrivateTorchRNG(dropout_seed)
-        self.num_updates = 0
-        self._critic_params = list(self.critic.parameters())
-        self._target_params = list(self.critic_target.parameters())
+    def _initial_log_alpha(self) -> float:
+        return max(super()._initial_log_alpha(), self._min_log_alpha)
 
     # ------------------------------------------------------------------------------------------------ acting
     def _alpha(self) -> torch.Tensor:
         # log_alpha is clamped after every step; the clamp_min here also absorbs exp(log(floor)) rounding below
-        # the floor in float32, so the alpha actually used is never below meta_min_alpha.
+        # the floor in float32, so the alpha actually used is never below min_alpha.
         return self.log_alpha.detach().exp().clamp_min(self.min_alpha)
 
     @property
@@ -88,13 +104,7 @@ class DiscreteSAC(CheckpointedAgent):
 
     @torch.no_grad()
     def _logits(self, obs: np.ndarray) -> tuple[torch.Tensor, bool]:
-        obs_t = torch.as_tensor(np.asarray(obs, dtype=np.float32))
-        single = obs_t.dim() == 1
-        if single:
-            obs_t = obs_t.unsqueeze(0)
-        if obs_t.dim() != 2 or obs_t.shape[1] != self.obs_dim:
-            raise ValueError(f"obs must have shape (B, {self.obs_dim}) or ({self.obs_dim},), "
-                             f"got {tuple(obs_t.shape)}")
+        obs_t, single = self._observations(obs)
         was_training = self.actor.training
         self.actor.eval()  # no dropout when acting
         try:
@@ -126,22 +136,18 @@ class DiscreteSAC(CheckpointedAgent):
         q1_next, q2_next = self.critic_target.all_actions(next_obs)
         return (log_pi.exp() * (torch.min(q1_next, q2_next) - alpha * log_pi)).sum(-1)
 
-    def update(self, batch: dict[str, np.ndarray], weights: np.ndarray | None = None
-               ) -> tuple[np.ndarray, dict[str, float]]:
+    def update(self, batch: ReplayBatch) -> tuple[np.ndarray, dict[str, float]]:
         """One step of critics, actor and temperature, then the Polyak step of the target critics.
 
-        Args:
-            batch: ``obs`` (B, obs_dim), ``action`` (B,) integer goals, ``reward`` (B,) = the discounted
-                extrinsic return of the k low-level steps the goal ran, ``next_obs`` (B, obs_dim), ``done`` (B,)
-                = terminated within those steps, ``discount`` (B,) = meta_gamma ** k (required: k varies when
-                an episode ends inside a goal, and a wrong default would silently bias every target).
-            weights: PER importance weights (B,); None = ones.
+        ``batch``: ``action`` (B,) integer goals, ``reward`` the discounted extrinsic return of the k low-level steps
+        the goal ran, ``done`` = terminated within those steps, ``discount`` = meta_gamma ** k (required: k varies
+        when an episode ends inside a goal, and a wrong default would silently bias every target), ``weights``
+        PER's or None for ones.
 
-        Returns:
-            td_errors (B,) float32 = 0.5 (|Q1(s,a) - y| + |Q2(s,a) - y|) before the step; metrics: critic_loss,
-            actor_loss, alpha (used in this update), alpha_loss, entropy (mean H(pi(.|s))), q_mean.
+        Returns the TD errors (B,) float32 and the metrics (:meth:`OffPolicyAgent._finish_update`); ``alpha`` is the
+        value used in this update, ``entropy`` the mean H(pi(.|s)).
         """
-        obs, action, reward, next_obs, done, discount, w = self._tensors(batch, weights)
+        obs, action, reward, next_obs, done, discount, w = self._tensors(batch)
 
         with self.dropout_rng:
             alpha = self._alpha()
@@ -175,34 +181,15 @@ class DiscreteSAC(CheckpointedAgent):
             with torch.no_grad():
                 self.log_alpha.clamp_(min=self._min_log_alpha)
 
-        polyak_update(self._critic_params, self._target_params, self.tau)
-        self.num_updates += 1
+        return self._finish_update(q1, q2, y, critic_loss, actor_loss, alpha, alpha_loss, entropy.mean())
 
-        with torch.no_grad():
-            td_errors = 0.5 * ((q1.detach() - y).abs() + (q2.detach() - y).abs())
-            values = torch.stack([critic_loss.detach(), actor_loss.detach(), alpha, alpha_loss.detach(),
-                                  entropy.mean(), 0.5 * (q1.detach().mean() + q2.detach().mean())])
-        return td_errors.numpy(), dict(zip(METRIC_NAMES, values.tolist()))
+    def _actions(self, action: np.ndarray, b: int) -> torch.Tensor:
+        action = np.asarray(action)
+        if action.shape != (b,) or not np.issubdtype(action.dtype, np.integer):
+            raise ValueError(f"batch.action must be integer goals of shape ({b},), got {action.dtype} {action.shape}")
+        if b and (action.min() < 0 or action.max() >= self.n_actions):
+            raise ValueError(f"batch.action must be in [0, {self.n_actions}), got {action.min()}..{action.max()}")
+        return torch.as_tensor(action.astype(np.int64, copy=False))
 
-    def _tensors(self, batch: dict[str, np.ndarray], weights: np.ndarray | None):
-        obs = torch.as_tensor(np.asarray(batch["obs"], dtype=np.float32))
-        if obs.dim() != 2 or obs.shape[1] != self.obs_dim:
-            raise ValueError(f"batch['obs'] must have shape (B, {self.obs_dim}), got {tuple(obs.shape)}")
-        b = obs.shape[0]
-        action_np = np.asarray(batch["action"])
-        if action_np.shape != (b,) or not np.issubdtype(action_np.dtype, np.integer):
-            raise ValueError(f"batch['action'] must be integer goals of shape ({b},), "
-                             f"got {action_np.dtype} {action_np.shape}")
-        if b and (action_np.min() < 0 or action_np.max() >= self.n_actions):
-            raise ValueError(f"batch['action'] must be in [0, {self.n_actions}), got {action_np.min()}.."
-                             f"{action_np.max()}")
-        action = torch.as_tensor(action_np.astype(np.int64, copy=False))
-        reward = as_float_tensor("reward", batch["reward"], (b,))
-        next_obs = as_float_tensor("next_obs", batch["next_obs"], (b, self.obs_dim))
-        done = as_float_tensor("done", batch["done"], (b,))
-        if batch.get("discount") is None:
-            raise ValueError("batch['discount'] (meta_gamma ** k per transition) is required for the meta update")
-        discount = as_float_tensor("discount", batch["discount"], (b,))
-        w = torch.ones(b) if weights is None else as_float_tensor("weights", weights, (b,))
-        return obs, action, reward, next_obs, done, discount, w
-
+    def _default_discount(self, b: int) -> torch.Tensor:
+        raise ValueError("batch.discount (meta_gamma ** k per transition) is required for the meta update")

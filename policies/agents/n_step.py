@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from policies.agents.replay_batch import ReplayBatch
+
 
 class NStepReturns:
     """The pending steps of each environment; :meth:`add` returns the transitions they complete."""
@@ -18,9 +20,9 @@ class NStepReturns:
         self.pending: list[list[tuple[np.ndarray, np.ndarray, float]]] = [[] for _ in range(num_envs)]
 
     def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray,
-            terminated: np.ndarray, done: np.ndarray) -> dict[str, np.ndarray] | None:
+            terminated: np.ndarray, done: np.ndarray) -> ReplayBatch | None:
         """One vector step (``next_obs``: the real next observations, not reset ones); returns the completed n-step
-        transitions as arrays (obs, action, reward, next_obs, done, discount), or None."""
+        transitions (float32, with their ``discount``), or None."""
         out: list[tuple] = []
         for i, steps in enumerate(self.pending):
             steps.append((obs[i].copy(), actions[i].copy(), float(rewards[i])))
@@ -33,9 +35,8 @@ class NStepReturns:
                 steps.pop(0)
         if not out:
             return None
-        columns = list(zip(*out))
-        return {key: np.stack(column).astype(np.float32)
-                for key, column in zip(("obs", "action", "reward", "next_obs", "done", "discount"), columns)}
+        # the columns in ReplayBatch's order: obs, action, reward, next_obs, done, discount
+        return ReplayBatch(*(np.stack(column).astype(np.float32) for column in zip(*out)))
 
     def _transition(self, steps: list, next_obs: np.ndarray, done: float) -> tuple:
         ret = sum(self.gamma ** k * reward for k, (_, _, reward) in enumerate(steps))

@@ -1,9 +1,10 @@
 """Proportional prioritised experience replay (Schaul et al. 2016) on an array-based sum tree.
 
 The buffer stores named fields (``obs``, ``action``, ``reward``, ...) in preallocated numpy arrays and samples
-transitions with probability P(i) = p_i^alpha / sum_k p_k^alpha. Everything per sample is vectorised: a
-minibatch is drawn by one descent of the tree that loops over its depth (18 levels for 200,000 items), never
-over the batch. All randomness comes from the buffer's own seeded ``numpy.random.Generator``, which is part of
+transitions with probability P(i) = p_i^alpha / sum_k p_k^alpha; the agents learn from them as a
+:class:`policies.agents.replay_batch.ReplayBatch` (``sample_transitions``). Everything per sample is vectorised: a
+minibatch is drawn by one descent of the tree that loops over its depth (18 levels for 200,000 items), never over
+the batch. All randomness comes from the buffer's own seeded ``numpy.random.Generator``, which is part of
 ``state_dict()``, so a resumed run draws exactly the samples an uninterrupted one would have drawn.
 """
 from __future__ import annotations
@@ -11,6 +12,8 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+
+from policies.agents.replay_batch import ReplayBatch
 
 
 class SumTree:
@@ -203,6 +206,12 @@ class PrioritizedReplayBuffer:
         weights = (self.tree[indices] / self.tree.min) ** -beta
         batch = {name: array[indices] for name, array in self.data.items()}
         return batch, indices, weights.astype(np.float32)
+
+    def sample_transitions(self, batch_size: int, beta: float) -> ReplayBatch:
+        """:meth:`sample` of a buffer of transitions (the fields of :class:`ReplayBatch`), as one batch that carries
+        its importance weights and the rows it came from."""
+        fields, indices, weights = self.sample(batch_size, beta)
+        return ReplayBatch.from_fields(fields, weights, indices)
 
     def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
         """Set p = |td| + eps for sampled ``indices`` (repeated indices: the last one wins)."""

@@ -14,76 +14,89 @@ Conventions:
 - Observations are already normalised float32 (the caller's running mean / std).
 - Actions cross this API in the *environment* range [low, high]; inside, actor and critics work in [-1, 1].
 - ``done`` is *termination* only: a time-limit truncation still bootstraps.
-- Randomness: network initialisation, the policy's Gaussian noise (``self.generator``) and the dropout masks
-  (a private global-RNG stream, :class:`policies.agents.shared.PrivateTorchRNG`) come from three streams derived
-  from ``seed``; the caller's global torch RNG is neither used nor changed. All three are in ``state_dict``,
-  so a resumed run gives bit-identical next updates.
+- Randomness (the policy's Gaussian noise is ``self.generator``), checkpoints and what else the meta-controller
+  shares: :mod:`policies.agents.off_policy`.
 - Dropout (paper preset) is active for the online networks during updates; ``act`` always runs the actor in
   eval mode (dropout is a regulariser, exploration comes from the Gaussian), and the target critics are
   permanently in eval mode (their job is a low-variance bootstrap target).
-- Precision (``TrainConfig.update_dtype``): the update's passes run through ``forward_with`` and one
+- Precision (``SacConfig.update_dtype``): the update's passes run through ``forward_with`` and one
   :class:`policies.agents.networks.UpdateWeights`, which holds the bfloat16 casts of the weights between their
   changes (the same arithmetic as CPU autocast, bit for bit, minus its per-call casts); acting is float32.
 """
 from __future__ import annotations
 
 import contextlib
-import copy
-import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from policies.config import TrainConfig
-from policies.agents.adam import adam_step, fused_adam, zero_grads
 from policies.agents.action_scaler import ActionScaler
+from policies.agents.adam import adam_step, zero_grads
 from policies.agents.networks import SquashedGaussianActor, TwinQ, UpdateWeights
-from policies.agents.shared import CheckpointedAgent, PrivateTorchRNG, as_float_tensor, derive_seeds, polyak_update
+from policies.agents.off_policy import OffPolicyAgent
+from policies.agents.replay_batch import ReplayBatch
+from policies.agents.shared import as_float_tensor
+from policies.config import NetworkConfig, TrainConfig
 
-METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
+
+@dataclass(frozen=True)
+class SacConfig:
+    """The settings of one continuous SAC; :meth:`from_train_config` takes them from a run's ``TrainConfig``, which
+    holds their defaults and checks their ranges."""
+
+    actor: NetworkConfig
+    """The actor's hidden layers (observation -> hidden -> mean and log std of each action)."""
+    critic: NetworkConfig
+    """Each critic's hidden layers (observation and action -> hidden -> Q)."""
+    learning_rate: float
+    """Adam's learning rate of the actor, the critics and the temperature."""
+    gamma: float
+    """Discount of transitions that carry no discount of their own (one-step transitions)."""
+    tau: float
+    """Polyak rate of the target critics."""
+    log_std_bounds: tuple[float, float]
+    """Clip of the actor's log standard deviation (keeps the policy's spread finite and non-zero)."""
+    target_entropy: float | None
+    """The entropy the temperature steers the policy towards; None: -act_dim (Haarnoja et al.'s heuristic)."""
+    initial_alpha: float
+    """The temperature before the first update."""
+    action_margin: float
+    """Widening of the actor's range beyond the environment's, as a share of each range on each side
+    (:class:`policies.agents.action_scaler.ActionScaler`); 0: tanh maps exactly onto the range."""
+    update_dtype: str
+    """"float32" or "bfloat16": the precision of the hidden layers' matrix products in updates."""
+
+    @classmethod
+    def from_train_config(cls, config: TrainConfig) -> SacConfig:
+        """The continuous SAC of a run: HRL-SAC's low level (discounted by ``low_level_gamma``) or the flat SAC."""
+        return cls(actor=config.actor, critic=config.critic, learning_rate=config.learning_rate,
+                   gamma=config.sac_gamma, tau=config.tau, log_std_bounds=config.log_std_bounds,
+                   target_entropy=config.target_entropy, initial_alpha=config.initial_alpha,
+                   action_margin=config.action_margin, update_dtype=config.update_dtype)
 
 
-class SAC(CheckpointedAgent):
+class SAC(OffPolicyAgent):
     """Continuous SAC with twin critics, target critics and automatic entropy tuning.
 
     Args:
-        obs_dim: observation size (276 for SarSearch).
+        obs_dim: observation size (the task's observation layout: 288 on SarSearch-v1, 276 on SarSearch-v0).
         act_dim: action size (4).
         action_low, action_high: the environment's action box; ``act`` returns and ``update`` takes actions in it.
-        config: ``actor`` / ``critic`` networks, ``learning_rate``, ``sac_gamma``, ``tau``, ``log_std_bounds``,
-            ``target_entropy`` (None = -act_dim) and ``initial_alpha`` are used.
-        seed: the only source of randomness (see the module docstring).
+        config: the settings (:class:`SacConfig`).
+        seed: the only source of randomness (see :mod:`policies.agents.off_policy`).
+        input_mask: (obs_dim,) 0 / 1, the observation features the networks see; None: all of them.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: np.ndarray, action_high: np.ndarray,
-                 config: TrainConfig, seed: int = 0, input_mask: np.ndarray | None = None):
-        self.config = config
-        self.obs_dim, self.act_dim = int(obs_dim), int(act_dim)
+                 config: SacConfig, seed: int = 0, input_mask: np.ndarray | None = None):
+        self.act_dim = int(act_dim)
         self.scaler = ActionScaler(action_low, action_high, config.action_margin)
         if self.scaler.dim != self.act_dim:
             raise ValueError(f"action bounds have {self.scaler.dim} dimensions, act_dim is {self.act_dim}")
-        self.gamma, self.tau = float(config.sac_gamma), float(config.tau)
+        self.gamma = float(config.gamma)
         self.target_entropy = float(-act_dim if config.target_entropy is None else config.target_entropy)
-
-        init_seed, noise_seed, dropout_seed = derive_seeds(seed, 3)
-        with torch.random.fork_rng(devices=[]):  # initialise from our seed, leave the global RNG as it was
-            torch.manual_seed(init_seed)
-            self.actor = SquashedGaussianActor(obs_dim, act_dim, config.actor, config.log_std_bounds, input_mask)
-            self.critic = TwinQ(obs_dim, act_dim, config.critic, input_mask)
-        self.critic_target = copy.deepcopy(self.critic).eval().requires_grad_(False)
-        # Optimise log(alpha): keeps alpha positive and makes Adam's steps relative.
-        self.log_alpha = torch.tensor(math.log(config.initial_alpha), dtype=torch.float32, requires_grad=True)
-
-        lr = config.learning_rate
-        self.actor_optim = fused_adam(self.actor.parameters(), lr)  # stepped by adam_step
-        self.critic_optim = fused_adam(self.critic.parameters(), lr)
-        self.alpha_optim = torch.optim.Adam([self.log_alpha], lr=lr)
-
-        self.generator = torch.Generator().manual_seed(noise_seed)  # the policy's Gaussian noise
-        self.dropout_rng = PrivateTorchRNG(dropout_seed)  # dropout masks during updates
-        self.num_updates = 0
-        self._critic_params = list(self.critic.parameters())
-        self._target_params = list(self.critic_target.parameters())
+        super().__init__(obs_dim, config, seed, input_mask)
         self._actor_params = list(self.actor.parameters())
         self._params = self._actor_params + self._critic_params + self._target_params
         self._weights = UpdateWeights(torch.bfloat16 if config.update_dtype == "bfloat16" else torch.float32)
@@ -92,6 +105,11 @@ class SAC(CheckpointedAgent):
         self._actor_has_dropout = any(isinstance(m, torch.nn.Dropout) for m in self.actor.modules())
         self._has_dropout = self._actor_has_dropout or any(isinstance(m, torch.nn.Dropout)
                                                            for m in self.critic.modules())
+
+    def _build_networks(self, input_mask: np.ndarray | None) -> tuple[SquashedGaussianActor, TwinQ]:
+        cfg = self.config
+        return (SquashedGaussianActor(self.obs_dim, self.act_dim, cfg.actor, cfg.log_std_bounds, input_mask),
+                TwinQ(self.obs_dim, self.act_dim, cfg.critic, input_mask))
 
     # ------------------------------------------------------------------------------------------------ acting
     @property
@@ -105,12 +123,7 @@ class SAC(CheckpointedAgent):
         ``deterministic``: ``tanh(mean)``, otherwise a sample from ``self.generator``. The actor runs in eval
         mode either way (no dropout). A single observation (obs_dim,) gives a single action (act_dim,).
         """
-        obs_t = torch.as_tensor(np.asarray(obs, dtype=np.float32))
-        single = obs_t.dim() == 1
-        if single:
-            obs_t = obs_t.unsqueeze(0)
-        if obs_t.dim() != 2 or obs_t.shape[1] != self.obs_dim:
-            raise ValueError(f"obs must have shape (B, {self.obs_dim}) or ({self.obs_dim},), got {tuple(obs_t.shape)}")
+        obs_t, single = self._observations(obs)
         if not self._actor_has_dropout:
             unit = self.actor.deterministic(obs_t) if deterministic else self.actor.sample_action(obs_t, self.generator)
         else:
@@ -135,23 +148,16 @@ class SAC(CheckpointedAgent):
         soft_value = torch.min(q1_next, q2_next) - alpha * next_log_prob
         return reward + discount * (1.0 - done) * soft_value
 
-    def update(self, batch: dict[str, np.ndarray], weights: np.ndarray | None = None
-               ) -> tuple[np.ndarray, dict[str, float]]:
+    def update(self, batch: ReplayBatch) -> tuple[np.ndarray, dict[str, float]]:
         """One gradient step of critics, actor and temperature, then the Polyak step of the target critics.
 
-        Args:
-            batch: ``obs`` (B, obs_dim), ``action`` (B, act_dim) in the ENVIRONMENT range, ``reward`` (B,),
-                ``next_obs`` (B, obs_dim), ``done`` (B,) = terminated (not truncated), optional ``discount``
-                (B,) replacing ``gamma`` per sample (e.g. gamma^n for n-step returns).
-            weights: PER importance weights (B,); None = ones.
+        ``batch``: actions (B, act_dim) in the ENVIRONMENT range, ``done`` = terminated (not truncated), ``discount``
+        per transition (gamma^n for n-step returns) or None for ``gamma``, ``weights`` PER's or None for ones.
 
-        Returns:
-            td_errors (B,) float32: 0.5 (|Q1(s,a) - y| + |Q2(s,a) - y|) before the step, i.e. the mean absolute
-            error of the two critics (both are trained on y, so both count) -- the new PER priorities.
-            metrics: critic_loss, actor_loss, alpha (the value used in this update), alpha_loss, entropy
-            (-mean log pi(a~|s), a sample estimate of the policy entropy), q_mean (mean of Q1 and Q2 on the batch).
+        Returns the TD errors (B,) float32 and the metrics (:meth:`OffPolicyAgent._finish_update`); ``alpha`` is the
+        value used in this update, ``entropy`` -mean log pi(a~|s), a sample estimate of the policy's entropy.
         """
-        obs, action, reward, next_obs, done, discount, w = self._tensors(batch, weights)
+        obs, action, reward, next_obs, done, discount, w = self._tensors(batch)
         action = self.scaler.to_unit(action)  # the critics live in the actor's [-1, 1] space
 
         with self.dropout_rng if self._has_dropout else contextlib.nullcontext():
@@ -169,15 +175,7 @@ class SAC(CheckpointedAgent):
             q1_pi, q2_pi = self.critic.forward_with(obs, self.scaler.flown(new_action), self._weights, frozen=True)
             actor_loss, alpha_loss = self._actor_step(alpha, log_prob, q1_pi, q2_pi)
 
-        polyak_update(self._critic_params, self._target_params, self.tau)
-        self._weights.forget_casts(self._target_params)
-        self.num_updates += 1
-
-        with torch.no_grad():
-            td_errors = 0.5 * ((q1.detach() - y).abs() + (q2.detach() - y).abs())
-            values = torch.stack([critic_loss.detach(), actor_loss.detach(), alpha, alpha_loss.detach(),
-                                  -log_prob.detach().mean(), 0.5 * (q1.detach().mean() + q2.detach().mean())])
-        return td_errors.numpy(), dict(zip(METRIC_NAMES, values.tolist()))  # one conversion for all metrics
+        return self._finish_update(q1, q2, y, critic_loss, actor_loss, alpha, alpha_loss, -log_prob.detach().mean())
 
     def _critic_step(self, q1: torch.Tensor, q2: torch.Tensor, y: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
         """The critics' loss (PER-weighted squared errors of both against y) and their optimiser step."""
@@ -205,21 +203,15 @@ class SAC(CheckpointedAgent):
         self._weights.forget_casts(self._actor_params)
         return actor_loss, alpha_loss
 
+    def _targets_moved(self) -> None:
+        self._weights.forget_casts(self._target_params)
+
     def load_state_dict(self, state: dict) -> None:
         super().load_state_dict(state)
         self._weights.forget(self._params)  # new values: nothing kept of the old ones may survive
 
-    def _tensors(self, batch: dict[str, np.ndarray], weights: np.ndarray | None):
-        obs = torch.as_tensor(np.asarray(batch["obs"], dtype=np.float32))
-        if obs.dim() != 2 or obs.shape[1] != self.obs_dim:
-            raise ValueError(f"batch['obs'] must have shape (B, {self.obs_dim}), got {tuple(obs.shape)}")
-        b = obs.shape[0]
-        action = as_float_tensor("action", batch["action"], (b, self.act_dim))
-        reward = as_float_tensor("reward", batch["reward"], (b,))
-        next_obs = as_float_tensor("next_obs", batch["next_obs"], (b, self.obs_dim))
-        done = as_float_tensor("done", batch["done"], (b,))
-        discount = (as_float_tensor("discount", batch["discount"], (b,)) if batch.get("discount") is not None
-                    else torch.full((b,), self.gamma))
-        w = torch.ones(b) if weights is None else as_float_tensor("weights", weights, (b,))
-        return obs, action, reward, next_obs, done, discount, w
+    def _actions(self, action: np.ndarray, b: int) -> torch.Tensor:
+        return as_float_tensor("action", action, (b, self.act_dim))
 
+    def _default_discount(self, b: int) -> torch.Tensor:
+        return torch.full((b,), self.gamma)

@@ -1,5 +1,5 @@
-"""What both SAC agents (``policies.agents.sac``, ``policies.agents.discrete_sac``) share besides their networks: seeds
-and private random streams, the checkpoint state, the Polyak step of the target critics and the batch check."""
+"""The small tools of both SAC agents' common base (``policies.agents.off_policy``): seeds and private random
+streams, the Polyak step of the target critics and the strict batch check."""
 from __future__ import annotations
 
 import numpy as np
@@ -49,29 +49,5 @@ def as_float_tensor(name: str, value, shape: tuple[int, ...]) -> torch.Tensor:
     """
     tensor = torch.as_tensor(np.asarray(value, dtype=np.float32))
     if tuple(tensor.shape) != shape:
-        raise ValueError(f"batch[{name!r}] must have shape {shape}, got {tuple(tensor.shape)}")
+        raise ValueError(f"batch.{name} must have shape {shape}, got {tuple(tensor.shape)}")
     return tensor
-
-
-class CheckpointedAgent:
-    """``state_dict`` / ``load_state_dict`` shared by SAC and discrete SAC: networks, target critics, optimisers,
-    the entropy temperature and every random stream, so that a resumed run gives bit-identical next updates."""
-
-    _MODULES = ("actor", "critic", "critic_target", "actor_optim", "critic_optim", "alpha_optim")
-
-    def state_dict(self) -> dict:
-        """Everything a resumed run needs (like ``nn.Module.state_dict``, tensors are shared: ``torch.save`` or
-        deep-copy it for a snapshot)."""
-        state = {name: getattr(self, name).state_dict() for name in self._MODULES}
-        state.update(log_alpha=self.log_alpha.detach().clone(), generator=self.generator.get_state(),
-                     dropout_rng=self.dropout_rng.state.clone(), num_updates=self.num_updates)
-        return state
-
-    def load_state_dict(self, state: dict) -> None:
-        for name in self._MODULES:
-            getattr(self, name).load_state_dict(state[name])
-        with torch.no_grad():
-            self.log_alpha.copy_(state["log_alpha"])  # in place: alpha_optim holds this very tensor
-        self.generator.set_state(state["generator"])
-        self.dropout_rng.state = state["dropout_rng"].clone()
-        self.num_updates = int(state["num_updates"])

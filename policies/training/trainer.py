@@ -37,14 +37,12 @@ from typing import Callable
 import numpy as np
 import torch
 
-from missions.search_state_v1 import BINGO_RESERVE_S
 from missions.goals import GOAL_NAMES, RETURN_TO_BASE
 from missions.mission_file import load_mission
-from policies.agents.discrete_sac import DiscreteSAC
+from missions.search_state_v1 import BINGO_RESERVE_S
 from policies.agents.n_step import NStepReturns
 from policies.agents.normalizer import RunningMeanStd
 from policies.agents.prioritized_replay import PrioritizedReplayBuffer, linear_beta
-from policies.agents.sac import SAC
 from policies.checkpoint import (
     CHECKPOINT,
     CheckpointPolicy,
@@ -52,6 +50,7 @@ from policies.checkpoint import (
     dump_environment,
     load_checkpoint_state,
     load_environment,
+    new_agents,
 )
 from policies.config import TrainConfig
 from policies.env.core import ACTION_HIGH, ACTION_LOW, SarSearchConfig
@@ -87,19 +86,14 @@ class Trainer:
         self.rng = np.random.default_rng(cfg.seed)
         self.obs_dim, self.meta_dim = cfg.layout.dim, cfg.layout.meta_dim
         self.normalizer = RunningMeanStd((self.obs_dim,))
-        self.low = SAC(self.obs_dim, 4, ACTION_LOW, ACTION_HIGH, cfg, seed=cfg.seed,
-                       input_mask=cfg.low_level_input_mask)
+        self.low, self.meta = new_agents(cfg)  # the meta-controller: HRL-SAC only
         fields = {"obs": ((self.obs_dim,), np.float32), "action": ((4,), np.float32), "reward": ((), np.float32),
                   "next_obs": ((self.obs_dim,), np.float32), "done": ((), np.float32)}
         if cfg.n_step > 1:  # one-step runs keep the buffer layout (and the numbers) they always had
             fields["discount"] = ((), np.float32)
         self.low_buffer = PrioritizedReplayBuffer(cfg.buffer_size, fields, cfg.per_alpha, cfg.per_eps, cfg.seed)
         self.n_step = NStepReturns(cfg.n_step, cfg.sac_gamma, cfg.num_envs) if cfg.n_step > 1 else None
-        self.meta = self.meta_buffer = None
-        if self.hrl:
-            self.meta = DiscreteSAC(self.meta_dim, len(GOAL_NAMES), cfg, seed=cfg.seed + 1,
-                                    input_mask=cfg.meta_input_mask)
-            self.meta_buffer = self._new_meta_buffer()
+        self.meta_buffer = self._new_meta_buffer() if self.hrl else None
         n = cfg.num_envs
         self.step = 0  # environment steps so far (summed over environments)
         self.update_budget = 0.0
@@ -235,17 +229,17 @@ class Trainer:
             self.update_budget += cfg.updates_per_step * cfg.num_envs
         while self.update_budget >= 1.0:
             self.update_budget -= 1.0
-            batch, indices, weights = self.low_buffer.sample(cfg.batch_size, beta)
-            batch["obs"], batch["next_obs"] = self._norm(batch["obs"]), self._norm(batch["next_obs"])
-            td, metrics = self.low.update(batch, weights)
-            self.low_buffer.update_priorities(indices, td)
+            batch = self.low_buffer.sample_transitions(cfg.batch_size, beta)
+            batch.obs, batch.next_obs = self._norm(batch.obs), self._norm(batch.next_obs)
+            td, metrics = self.low.update(batch)
+            self.low_buffer.update_priorities(batch.indices, td)
             self.metrics.update(metrics)
         if self.hrl and len(self.meta_buffer) >= cfg.meta_batch_size:
             for _ in range(meta_transitions * cfg.meta_updates_per_transition):
-                batch, indices, weights = self.meta_buffer.sample(cfg.meta_batch_size, beta)
-                batch["obs"], batch["next_obs"] = self._norm(batch["obs"]), self._norm(batch["next_obs"])
-                td, metrics = self.meta.update(batch, weights)
-                self.meta_buffer.update_priorities(indices, td)
+                batch = self.meta_buffer.sample_transitions(cfg.meta_batch_size, beta)
+                batch.obs, batch.next_obs = self._norm(batch.obs), self._norm(batch.next_obs)
+                td, metrics = self.meta.update(batch)
+                self.meta_buffer.update_priorities(batch.indices, td)
                 self.metrics.update({f"meta_{k}": v for k, v in metrics.items()})
 
     def _store_low(self, actions: np.ndarray, reward: np.ndarray, real_next: np.ndarray, terminated: np.ndarray,
@@ -256,7 +250,7 @@ class Trainer:
             return
         transitions = self.n_step.add(self.obs, actions, reward, real_next, terminated, done)
         if transitions is not None:
-            self.low_buffer.add(**transitions)
+            self.low_buffer.add(**transitions.stored_fields())
 
     # ------------------------------------------------------------------ the loop
     def run(self, progress: bool = True, stop_at: int | None = None) -> Path:
