@@ -13,12 +13,14 @@ from mavlink_signing import load_key_file
 from sitl_bridge.ardupilot.params import STREAM_GROUPS, STREAM_LINKS
 from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
+from sitl_bridge.serial_link import SerialLink, open_pty_link, open_serial_link
 from sitl_bridge.server import UdpPorts, VehicleServer
 from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile
 from sitl_bridge.vehicle_config import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
 from sitl_bridge.wind import Wind
 
 FAILSAFE_ACTIONS = {"hold": 5, "posctl": 0, "land": 4, "rtl": 3}
+DEFAULT_BAUD = 57600
 
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
@@ -61,6 +63,11 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                        help="port the GCS link sends to (14550); 0 disables it")
     ports.add_argument("--tcp-port", type=udp_port, default=None,
                        help="TCP server port (ArduPilot SERIAL0, 5760; PX4: none); 0 disables it")
+    ports.add_argument("--pty", action="store_true",
+                       help="also serve a serial line on a new pseudo-terminal; its path is printed (a client "
+                            "connects with serial:PATH, e.g. hrlsac mission run --connect serial:/dev/pts/5)")
+    ports.add_argument("--serial", metavar="DEVICE[:BAUD]", default=None,
+                       help=f"also serve a serial device (default {DEFAULT_BAUD} baud), e.g. /dev/ttyUSB0:921600")
     parser.add_argument("--signing-key", metavar="FILE", default=None,
                         help="MAVLink 2 signing key file (from 'hrlsac keygen'): sign everything, reject unsigned, "
                              "wrongly signed and replayed messages except PX4's unsigned allow-list")
@@ -113,6 +120,19 @@ def config_from_args(args: argparse.Namespace) -> VehicleConfig:
                          reboot_at_s=args.reboot_at, reboot_downtime_s=args.reboot_downtime)
 
 
+def serial_links_from_args(args: argparse.Namespace) -> tuple[SerialLink, ...]:
+    """The serial lines asked for: a new pseudo-terminal (--pty), a serial device (--serial DEVICE[:BAUD])."""
+    links = []
+    if args.serial:
+        device, _, baud = args.serial.rpartition(":")
+        if not baud.isdigit():
+            device, baud = args.serial, str(DEFAULT_BAUD)
+        links.append(open_serial_link(device, int(baud)))
+    if args.pty:
+        links.append(open_pty_link("pty")[0])
+    return tuple(links)
+
+
 def ports_from_args(args: argparse.Namespace) -> UdpPorts:
     """The personality's default ports, with the ones given on the command line (0 disables GCS and TCP)."""
     ports = UdpPorts.for_autopilot(args.autopilot, args.host)
@@ -134,7 +154,8 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
                 print(f"[{event.time_s:9.2f} s] {event.text}", flush=True)
 
         faults = parse_link_faults(args.link_faults) if args.link_faults else None
-        server = VehicleServer(config, ports, speed=args.speed, on_event=log, link_faults=faults)
+        server = VehicleServer(config, ports, speed=args.speed, on_event=log, link_faults=faults,
+                               extra_links=serial_links_from_args(args))
     except (ValueError, OSError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
@@ -168,7 +189,10 @@ def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleSer
     ardupilot = config.autopilot == "ardupilot"
     for index, link in enumerate(server.links):
         streams = f" (SR{index}_*)" if ardupilot else ""
-        if link.name == "tcp":
+        if isinstance(link, SerialLink):
+            print(f"  serial    {link.device}{streams}   mission run: --connect serial:{link.device}"
+                  f"   MAVProxy: --master={link.device}")
+        elif link.name == "tcp":
             print(f"  SERIAL0   tcp {host}:{ports.tcp_port}{streams}   MAVProxy: --master=tcp:{host}:{ports.tcp_port}"
                   f"   pymavlink: tcp:{host}:{ports.tcp_port}")
         elif link.name == "gcs":

@@ -19,7 +19,7 @@ from mavlink_signing import wall_timestamp
 from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.clock import PacedClock
 from sitl_bridge.faults import LinkFaults, apply_faults, wall_clock_since_now
-from sitl_bridge.link import TcpServerLink, UdpLink
+from sitl_bridge.link import Link, TcpServerLink, UdpLink
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
 
@@ -54,13 +54,15 @@ class VehicleServer:
     foreground."""
 
     def __init__(self, config: VehicleConfig | None = None, ports: UdpPorts = UdpPorts(), speed: float = 1.0,
-                 on_event: Callable[[AutopilotEvent], None] | None = None, link_faults: LinkFaults | None = None):
+                 on_event: Callable[[AutopilotEvent], None] | None = None, link_faults: LinkFaults | None = None,
+                 extra_links: tuple[Link, ...] = ()):
         """``link_faults``: injected on every UDP link, timed on the wall clock from now, seeded by the vehicle's
         seed (plus the link's index) unless they carry their own seed. Link order (ArduPilot's SRn_ index, the
-        signing link id): API then GCS without a TCP port (PX4), else TCP, GCS, API (ArduPilot)."""
+        signing link id): API then GCS without a TCP port (PX4), else TCP, GCS, API (ArduPilot); then
+        ``extra_links`` (a serial line: sitl_bridge.serial_link), which the server closes with the others."""
         self.clock = PacedClock(speed)
         order = ("tcp", "gcs", "api") if ports.tcp_port is not None else ("api", "gcs")
-        self.links: list[UdpLink | TcpServerLink] = []
+        self.links: list[Link] = []
         try:
             for name in order:
                 if name == "tcp":
@@ -70,9 +72,10 @@ class VehicleServer:
                 elif name == "api":
                     self.links.append(UdpLink("api", (ports.host, ports.api_port), (ports.host, ports.api_remote_port)))
         except OSError:
-            for link in self.links:
+            for link in (*self.links, *extra_links):
                 link.close()
             raise
+        self.links.extend(extra_links)
         seed = (config or VehicleConfig()).seed
         udp = [link for link in self.links if not link.stream]
         faulty = iter(apply_faults(udp, link_faults, wall_clock_since_now(), seed))

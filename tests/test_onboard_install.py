@@ -16,6 +16,7 @@ from types import SimpleNamespace
 import pytest
 
 from test_runner import ALL_STATES, fly_against_sitl_process
+from test_serial_flight import assert_flown_over_serial, fly_over_serial
 
 ROOT = Path(__file__).resolve().parents[1]
 PRETRAINED = ROOT / "policies" / "pretrained" / "hrl-sac.pt"
@@ -78,3 +79,9 @@ def test_the_onboard_install_flies_a_mission_against_the_simulated_vehicle(onboa
                                             runner=[str(onboard / "hrlsac")])
     assert [t["to"] for t in report["transitions"]] == ALL_STATES
     assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20
+
+
+def test_the_onboard_install_flies_a_mission_over_a_serial_line(onboard, tmp_path):
+    """``--connect serial:...`` needs pyserial (pymavlink imports it for a serial connection): a base dependency,
+    so the on-board install flies over a serial line (here a pseudo-terminal to the simulated vehicle)."""
+    assert_flown_over_serial(*fly_over_serial(tmp_path, runner=[str(onboard / "hrlsac")]))
