@@ -9,7 +9,9 @@ Run it before and after a change that must not change behaviour (a refactoring, 
 Everything runs through the ``hrlsac`` command (its interface is what users rely on), in a temporary folder.
 What is digested, and what is left out because it is not determined by the seed:
 - mission replays: ``flight.tlog`` and ``report.json`` byte for byte (both are on the simulated clock; the
-  temporary folder's name, which reports quote, is replaced by a constant in every file);
+  temporary folder's name, which reports quote, is replaced by a constant in every file); each tlog also as its
+  MAVLink frames alone (``flight.tlog frames``) and as its timestamps counted from the first
+  (``flight.tlog times``), so that a change of the tlog's start time shows as that alone;
 - training runs: ``config.json`` byte for byte, ``progress.csv`` without its ``steps_per_s`` column (wall clock),
   and every tensor, array and number of ``checkpoint.pt`` except the pickled environment (its bytes name the
   environment's module, which a file move changes; the evaluation and replays below depend on it anyway);
@@ -96,13 +98,43 @@ def _checkpoint_digest(path: str) -> str:
     return digest.hexdigest()
 
 
+def _tlog_records(path: str) -> list[tuple[int, bytes]]:
+    """A tlog's (timestamp in microseconds, MAVLink frame) records."""
+    with open(path, "rb") as handle:
+        data = handle.read()
+    records, at = [], 0
+    while at < len(data):
+        stamp, frame = int.from_bytes(data[at:at + 8], "big"), data[at + 8:]
+        if frame[0] == 0xFD:  # MAVLink 2: 10-byte header, payload, CRC, and the signature if flagged
+            length = 12 + frame[1] + (13 if frame[2] & 1 else 0)
+        elif frame[0] == 0xFE:  # MAVLink 1: 6-byte header, payload, CRC
+            length = 8 + frame[1]
+        else:
+            raise ValueError(f"{path}: no MAVLink frame at byte {at + 8}")
+        records.append((stamp, frame[:length]))
+        at += 8 + length
+    return records
+
+
+def _tlog_digests(path: str) -> dict[str, str]:
+    """The tlog's frames without their timestamps, and its timestamps counted from the first."""
+    records = _tlog_records(path)
+    frames = hashlib.sha256(b"".join(frame for _, frame in records)).hexdigest()
+    first = records[0][0] if records else 0
+    times = hashlib.sha256(" ".join(str(stamp - first) for stamp, _ in records).encode()).hexdigest()
+    return {"frames": frames, "times": times}
+
+
 def _replay(digests: dict, name: str, work: str, *args: str) -> None:
     out = os.path.join(work, name)
     _run("mission", "replay", "--no-video", "--quiet", "--out", out, *args)
     for folder, _, files in sorted(os.walk(out)):
         for file in sorted(files):
             path = os.path.join(folder, file)
-            digests[f"{name}/{os.path.relpath(path, out)}"] = _file_digest(path, work)
+            key = f"{name}/{os.path.relpath(path, out)}"
+            digests[key] = _file_digest(path, work)
+            if file.endswith(".tlog"):
+                digests.update({f"{key} {part}": digest for part, digest in _tlog_digests(path).items()})
 
 
 def _train(digests: dict, name: str, work: str, *args: str) -> str:
