@@ -59,11 +59,9 @@ def evaluate(trainer: Trainer) -> dict:
 
 STEPS = {"hrl-sac": 16_000, "sac": 20_000}
 HRL_SETTINGS = {"meta_returned_reward": 0.0}
-"""HRL-SAC's meta-controller learns with a return home paying nothing, as the shipped policy and issue #22's
-comparisons train it: with the environment's +20, the meta-controller of 5 of 6 seeds settled on ReturnToBase
-(60-84 % of the evaluation episodes came home) before the low level had learned to reach the victim, once the
-environment capped the speed where flight does; with it, 10 of 10 seeds learn (docs/results/README.md, "The speed
-cap")."""
+"""HRL-SAC's meta-controller learns with a return home paying nothing, as the shipped policy is trained: with the
+environment's +20, the meta-controller of most seeds settled on ReturnToBase before the low level had learned to
+reach the victim (docs/training.md, "SarSearch-v1 options")."""
 
 
 def easy_trainer(tmp_path, algo: str, seed: int = 0, **overrides) -> Trainer:

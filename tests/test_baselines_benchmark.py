@@ -1,6 +1,6 @@
 """``benchmarks/baselines.py`` flies the searchers it is told to, over the detection streams asked for, on the
 scenarios of a generator file, and refuses what it cannot fly with one line: the registered test look of the
-lookahead planner (docs/results/README.md) is run with these options."""
+lookahead planner (docs/results.md) is run with these options."""
 from __future__ import annotations
 
 import json
@@ -46,7 +46,8 @@ def test_each_searcher_is_paired_with_the_first(tmp_path, monkeypatch):
     """With several searchers each after the first gets its paired difference from the first, on the same
     scenarios, with a scenario-bootstrap interval around it."""
     out = tmp_path / "paired.json"
-    assert run(monkeypatch, "--split", "val", "--episodes", "8", "--only", "greedy_bayes,random", "--out", str(out)) == 0
+    argv = ["--split", "val", "--episodes", "8", "--only", "greedy_bayes,random", "--out", str(out)]
+    assert run(monkeypatch, *argv) == 0
     report = json.loads(out.read_text())
     rates = {r["baseline"]: r["success_rate"] for r in report["results"]}
     paired = report["streams"]["random"]["minus_greedy_bayes"]

@@ -1,5 +1,5 @@
-"""The oracles of ``benchmarks/decision_ceiling.py`` do what its figures rest on (docs/results/README.md, "What
-SarSearch-v1 leaves to a decision-maker"): the oracle skip never looks at a decoy while greedy Bayes does, on the same
+"""The oracles of ``benchmarks/decision_ceiling.py`` do what its figures rest on (docs/results.md, "What the task
+leaves to decide"): the oracle skip never looks at a decoy while greedy Bayes does, on the same
 scenarios (a decoy beside the victim may still be identified in passing); the searcher that knows the victim finds
 it in (almost) every scenario greedy Bayes finds and more; and ``--identify-factor`` reaches the belief search."""
 from __future__ import annotations
@@ -15,9 +15,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 from decision_ceiling import KnownVictim, NeighbourhoodGreedy, TruthfulPlausibility, box_sum, fly_scripted  # noqa: E402,E501
 
-from missions.search_state_v1 import REJECTED  # noqa: E402
 from missions.generator import TASK_V1  # noqa: E402
 from missions.mission import FlightSettings  # noqa: E402
+from missions.search_state_v1 import REJECTED  # noqa: E402
 from policies.env.baselines_v1 import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
 
 EPISODES = 40
@@ -81,15 +81,16 @@ def test_knowing_the_victim_finds_it_where_greedy_bayes_does_not():
 
 
 def test_identify_factor_makes_a_close_look_longer_and_refuses_nonsense(tmp_path, monkeypatch, capsys):
-    """``--identify-factor`` (the costly-identification probe of docs/results) must reach the belief search: with
+    """``--identify-factor`` (the benchmark's costly-identification probe) must reach the belief search: with
     identification 20 times harder the searcher that knows the victim, whose only delay beyond the flight is its
     close look, takes longer (median time to success); a factor outside (0, 1] is a one-line error."""
     import json
 
     import decision_ceiling
-    import missions.search_state_v1 as belief_search
 
-    monkeypatch.setattr(belief_search, "IDENTIFY_SIZE_FACTOR", belief_search.IDENTIFY_SIZE_FACTOR)  # restored after
+    import missions.search_state_v1 as search_state_v1
+
+    monkeypatch.setattr(search_state_v1, "IDENTIFY_SIZE_FACTOR", search_state_v1.IDENTIFY_SIZE_FACTOR)  # restored after
     steps = {}
     for factor in (None, 0.0078125):
         out = tmp_path / f"{factor}.json"

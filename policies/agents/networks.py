@@ -7,9 +7,11 @@ The algorithms (``policies.agents.sac``, ``policies.agents.discrete_sac``) own t
 The continuous SAC's update evaluates the same layers through :class:`UpdateWeights` (``forward_with``), which
 hands each matrix product its weights in the update's precision: float32 as they are, or bfloat16 copies cast once
 per parameter value. Those are the operations CPU autocast performed (the same kernels on the same dtypes, so the
-same bits, checked by tests/test_update_precision.py), without autocast's per-call casts of every weight and its dispatch.
+same bits, checked by tests/test_update_precision.py), without autocast's per-call casts of every weight and its
+dispatch.
 
-Shapes in the paper preset (``TrainConfig.from_preset("paper")``)::
+Shapes in the paper preset (``TrainConfig.from_preset("paper")``) on the paper's observation, SarSearch-v0's (on
+SarSearch-v1 the observation is 288 wide, the meta observation 284)::
 
     SquashedGaussianActor  276 -> 512 -> 512 -> 512 -> 256 -> mean (4), log_std (4)
     TwinQ (each of two)    280 -> 512 -> 512 -> 256 -> 1
@@ -167,8 +169,9 @@ class ActionGradientOnly(torch.autograd.Function):
 
     The actor step needs dQ/da, not dQ/ds: autograd would compute the input gradient of the whole 280- or 292-wide
     first layer and keep 4 columns. Those columns, computed alone, are the same bits in bfloat16 (oneDNN's kernel
-    does not depend on the other columns; checked by tests/test_update_precision.py against the full gradient), for about a
-    fifth of an input-gradient product per critic. In float32 (MKL) they are not, so float32 keeps the full path.
+    does not depend on the other columns; checked by tests/test_update_precision.py against the full gradient), for
+    about a fifth of an input-gradient product per critic. In float32 (MKL) they are not, so float32 keeps the full
+    path.
     Forward: ``F.linear(cat(obs, act).to(bfloat16), W_i, b_i)`` per critic; backward: ``sum_i float(g_i @
     W_i[:, obs_dim:])``, the sum autograd forms where the critics' input gradients meet.
     """

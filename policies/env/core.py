@@ -17,11 +17,11 @@ import numpy as np
 from autonomy.observation import observe_search
 from missions import search
 from missions.action_frames import check_action_frame, movement_velocity
-from missions.search_state_v1 import TARGET_SLOTS
 from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
 from missions.search_state_v0 import splitmix64
+from missions.search_state_v1 import TARGET_SLOTS
 from missions.shield import shield_velocity
 from missions.validation import check_fields
 from sitl_bridge import dynamics

@@ -21,8 +21,8 @@ import numpy as np
 
 from missions import search
 from policies.config import TrainConfig
-from policies.env.task_v1 import REWARD_RETURNED
 from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
+from policies.env.task_v1 import REWARD_RETURNED
 
 
 def cross_track_m(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> np.ndarray:

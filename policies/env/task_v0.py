@@ -25,7 +25,13 @@ import numpy as np
 from autonomy.observation import LAYOUT_V3
 from missions.search_state_v0 import SearchState
 from policies.env.core import (
-    ENERGY_COMPONENTS, REWARD_BOUNDARY, REWARD_COLLISION, REWARD_ENERGY, REWARD_STEP, REWARD_TARGET, FlownSearch,
+    ENERGY_COMPONENTS,
+    REWARD_BOUNDARY,
+    REWARD_COLLISION,
+    REWARD_ENERGY,
+    REWARD_STEP,
+    REWARD_TARGET,
+    FlownSearch,
     SarSearchConfig,
 )
 

@@ -6,9 +6,9 @@ from typing import Sequence
 
 import numpy as np
 
-from policies.env.task_v1 import AmbiguousSearchBatch
 from policies.env.core import SarSearchConfig
 from policies.env.task_v0 import SarSearchBatch
+from policies.env.task_v1 import AmbiguousSearchBatch
 
 
 def batch_class(task: str) -> type:

@@ -1,6 +1,7 @@
 """``SarSearchVectorEnv``: N search episodes stepped together with numpy (gymnasium ``VectorEnv``).
 
-Same core as the single environment (the task's core, ``policies.env.tasks``), so for the same seeds both give identical episodes.
+Same core as the single environment (the task's core, ``policies.env.tasks``), so for the same seeds both give
+identical episodes.
 Auto-reset happens in the same step (gymnasium's ``AutoresetMode.SAME_STEP``): when episode i ends,
 ``obs[i]`` is already the first observation of its next episode, ``info["final_obs"][i]`` holds the last
 observation of the one that ended (``info["_final_obs"][i]`` is True), and the other info entries describe

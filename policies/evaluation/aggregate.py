@@ -57,8 +57,8 @@ def paired_scenario_bootstrap(a: np.ndarray, b: np.ndarray, samples: int = 10_00
     """Mean of ``a - b`` and its percentile interval from resampling the *scenarios*: ``a`` and ``b`` are
     (runs, episodes) successes of two methods on the same scenarios (episode i = scenario i; runs: detection streams
     or seeds, averaged per scenario first). Pairing over runs alone covers their luck but not which scenarios were
-    drawn; this covers both (a val gain that such an interval showed did not hold on test: docs/results/README.md,
-    "A lookahead planner")."""
+    drawn; this covers both (a val gain that an interval over runs alone showed need not hold on other scenarios:
+    docs/results.md)."""
     a, b = np.atleast_2d(np.asarray(a, dtype=np.float64)), np.atleast_2d(np.asarray(b, dtype=np.float64))
     if a.shape[1:] != b.shape[1:] or a.shape[1] < 1:
         raise ValueError(f"paired successes need the same scenarios, got shapes {a.shape} and {b.shape}")
