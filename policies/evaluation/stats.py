@@ -1,5 +1,5 @@
 """Small statistics shared by evaluations, comparisons and benchmarks: Wilson intervals, quantile summaries, Student-t
-intervals across seeds and the pooled statistics of a group of evaluations."""
+intervals across seeds (scipy's t distribution) and the pooled statistics of a group of evaluations."""
 from __future__ import annotations
 
 import math
@@ -26,27 +26,13 @@ def quantiles(values, qs=(0.1, 0.25, 0.5, 0.75, 0.9)) -> dict[str, float | None]
     return {f"p{round(q * 100)}": float(np.quantile(values, q)) for q in qs}
 
 
-# Two-sided 95 % Student-t quantiles t(0.975, dof); between the tabled dof, interpolated linearly in 1/dof.
-_T975 = {1: 12.706205, 2: 4.302653, 3: 3.182446, 4: 2.776445, 5: 2.570582, 6: 2.446912, 7: 2.364624,
-         8: 2.306004, 9: 2.262157, 10: 2.228139, 11: 2.200985, 12: 2.178813, 13: 2.160369, 14: 2.144787,
-         15: 2.131450, 16: 2.119905, 17: 2.109816, 18: 2.100922, 19: 2.093024, 20: 2.085963, 21: 2.079614,
-         22: 2.073873, 23: 2.068658, 24: 2.063899, 25: 2.059539, 26: 2.055529, 27: 2.051831, 28: 2.048407,
-         29: 2.045230, 30: 2.042272, 40: 2.021075, 60: 2.000298, 120: 1.979930}
-_Z975 = 1.959963984540054
-
-
 def t_quantile_975(dof: int) -> float:
     """The 0.975 quantile of Student's t with ``dof`` degrees of freedom (the 95 % two-sided critical value)."""
     if dof < 1:
         raise ValueError(f"dof must be >= 1, got {dof}")
-    if dof in _T975:
-        return _T975[dof]
-    tabled = sorted(_T975)
-    lower = max(d for d in tabled if d < dof)
-    upper = min((d for d in tabled if d > dof), default=None)
-    t_upper, inv_upper = (_Z975, 0.0) if upper is None else (_T975[upper], 1.0 / upper)
-    share = (1.0 / lower - 1.0 / dof) / (1.0 / lower - inv_upper)
-    return _T975[lower] + share * (t_upper - _T975[lower])
+    from scipy.stats import t  # on first use: scipy.stats is slower to import than all the evaluation code
+
+    return float(t.ppf(0.975, dof))
 
 
 def t_interval(values) -> tuple[float, float | None, tuple[float, float] | None]:
