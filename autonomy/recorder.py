@@ -1,10 +1,11 @@
 """What a mission leaves behind in its output folder: the tlog and the JSON report (a replay adds pictures).
 
 * ``flight.tlog``: every MAVLink message in both directions, each prefixed by the 8-byte big-endian time in
-  microseconds (the tlog format of MAVProxy and QGroundControl; ``mavlogdump.py flight.tlog`` reads it). The
-  time is the run's clock: simulated seconds from 0 in lockstep replay (so replays are byte-identical), wall
-  seconds since the start in real time. Written unbuffered message by message, so a killed run leaves a
-  readable log up to the kill.
+  microseconds since the Unix epoch (the tlog format of MAVProxy and QGroundControl; ``mavlogdump.py flight.tlog``
+  reads it). The time is the run's clock plus the start time the recorder is given: simulated seconds after a
+  configurable, fixed start in lockstep replay (so replays are byte-identical and tools such as ``mavtogpx.py``
+  date their points), wall seconds since the start in real time. Written unbuffered message by message, so a
+  killed run leaves a readable log up to the kill.
 * ``report.json``: the runner's report, written atomically (a temporary file, then a rename). While the run is
   going, a partial report marked ``"complete": false`` is rewritten the same way (when the run starts, then at most
   once per wall second as it goes, see :class:`PartialReport`); the last write has ``"complete": true``. A killed
@@ -27,15 +28,17 @@ REPORT = "report.json"
 
 
 class TlogRecorder:
-    """Appends timestamped MAVLink frames to a tlog file."""
+    """Appends timestamped MAVLink frames to a tlog file; ``start_us``: the time stamped for the run's time 0
+    (microseconds since the Unix epoch)."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, start_us: int = 0):
         self.path = Path(path)
+        self.start_us = start_us
         self._file = open(self.path, "wb", buffering=0)
         self.messages = 0
 
     def record(self, time_s: float, data: bytes) -> None:
-        self._file.write(struct.pack(">Q", int(round(time_s * 1e6))) + data)
+        self._file.write(struct.pack(">Q", self.start_us + int(round(time_s * 1e6))) + data)
         self.messages += 1
 
     def close(self) -> None:

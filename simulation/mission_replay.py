@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Callable
 
@@ -35,6 +36,18 @@ from sitl_bridge.dynamics import MultirotorParams
 from sitl_bridge.faults import LinkFaults, apply_faults
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
+
+
+DEFAULT_START_TIME = datetime(2025, 1, 1, tzinfo=timezone.utc)
+"""When a replay's simulated time 0 is, unless the replay is given a start time: fixed, so that two replays of the
+same seed write the same bytes; the tlog's timestamps count from it (``--start-time`` on ``hrlsac mission
+replay``)."""
+UNIX_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+
+
+def unix_microseconds(moment: datetime) -> int:
+    """``moment`` (aware) in whole microseconds since the Unix epoch, as a tlog stamps its messages."""
+    return (moment - UNIX_EPOCH) // timedelta(microseconds=1)
 
 
 @dataclass
@@ -72,13 +85,14 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
                    config: RunnerConfig = RunnerConfig(), vehicle_config: VehicleConfig | None = None,
                    say: Callable[[str], None] = lambda text: None, simulated_policy_s: float = 0.0,
                    link_faults: LinkFaults | None = None, limits: FlyawayLimits = FlyawayLimits(),
-                   signing_key: bytes | None = None) -> dict:
+                   signing_key: bytes | None = None, start_time: datetime = DEFAULT_START_TIME) -> dict:
     """Fly ``mission`` once; ``seed`` drives the vehicle's sensor noise and the simulated camera's draws.
     With ``out``, writes the tlog, report (partial ones while flying), trajectory PNG and (``video``) MP4 there.
     Returns the report. ``simulated_policy_s``: simulated time each policy decision takes (0: instant; tests of
     slow policies). ``link_faults``: faults on the link, timed on the simulated clock, seeded by ``seed`` unless
     they carry their own. ``limits``: what counts as a flyaway (the report's ``outcome``). ``signing_key``: sign
-    the link both ways (vehicle and runner), timestamps from simulated time so the tlog stays reproducible."""
+    the link both ways (vehicle and runner), timestamps from simulated time so the tlog stays reproducible.
+    ``start_time`` (aware): the moment simulated time 0 stands for in the tlog's timestamps."""
     vehicle_end, client_end = memory_link_pair("replay")
     vehicle_config = vehicle_config or VehicleConfig(home=start_point(mission), seed=seed,
                                                      airframe=airframe_for(mission))
@@ -94,7 +108,7 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        tlog = TlogRecorder(out / TLOG)
+        tlog = TlogRecorder(out / TLOG, unix_microseconds(start_time))
         pictures = VideoRecorder(out, video)
     connection = MemoryMavConnection(client_end, source_system=1, source_component=COMPANION_COMPONENT)
     link = VehicleLink(connection, clock.now, tlog, signing_key=signing_key, warn=say)

@@ -8,14 +8,15 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from datetime import datetime, timezone
 from pathlib import Path
 
 from autonomy.mission_cli import mission_parser, prepare_mission
 from hrlsac_cli import GROUPS
 
-# mission_replay at the top, though only the workers use it: on an on-board install (no OpenCV for the replay's
+# mission_replay at the top, though only the workers fly it: on an on-board install (no OpenCV for the replay's
 # pictures) the command then says at once which extra it needs, before it reads any file.
-from simulation import mission_replay  # noqa: F401
+from simulation import mission_replay
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
@@ -30,6 +31,10 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
     parser = mission_parser(prog, REPLAY_SUMMARY, simulated=True)
     parser.add_argument("--episodes", type=int, default=1, help="fly seeds SEED .. SEED+EPISODES-1")
     parser.add_argument("--no-video", action="store_true", help="skip replay.mp4 (faster)")
+    parser.add_argument("--start-time", metavar="ISO8601", default=None,
+                        help="the date and time the tlog's timestamps count from, e.g. 2025-06-01T14:30:00Z (without a "
+                             "zone: UTC); default 2025-01-01T00:00:00Z, fixed so that a replay's files are the same "
+                             "on every run")
     add_pool_arguments(parser)
     parser.add_argument("--link-faults", metavar="SPEC", default=None,
                         help="inject link faults on the simulated clock, seeded by each episode's seed unless "
@@ -46,6 +51,7 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
 def _check_replay_arguments(args: argparse.Namespace) -> None:
     if not 1 <= args.episodes <= 100_000:
         raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
+    args.start = mission_replay.DEFAULT_START_TIME if args.start_time is None else parse_start_time(args.start_time)
     args.faults = None
     if args.link_faults:
         from sitl_bridge.faults import parse_link_faults  # a real flight has the real link's faults
@@ -55,6 +61,20 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
         args.pool = pool_from_arguments(args)
     except WorkerPoolError as exc:
         raise ValueError(str(exc)) from None
+
+
+def parse_start_time(text: str) -> datetime:
+    """``--start-time``: an ISO 8601 date and time (UTC without a zone), not before the Unix epoch."""
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        moment = None
+    if moment is not None and moment.tzinfo is None:
+        moment = moment.replace(tzinfo=timezone.utc)
+    if moment is None or moment < mission_replay.UNIX_EPOCH:
+        raise ValueError(f"--start-time must be an ISO 8601 date and time from 1970 on, e.g. 2025-06-01T14:30:00Z, "
+                         f"got {text!r}")
+    return moment
 
 
 class _LineStream:
@@ -86,7 +106,7 @@ def episode_progress(total: int, quiet: bool):
 
 def _replay(mission, policy, args, out: Path, prog: str) -> int:
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
-    options = dict(signing_key=args.key, link_faults=args.faults)
+    options = dict(signing_key=args.key, link_faults=args.faults, start_time=args.start)
     episodes = [ReplayEpisode(mission, args.policy, args.seed + episode,
                               out if args.episodes == 1 else out / f"seed-{args.seed + episode:05d}",
                               video=not args.no_video, narrate=args.episodes == 1 and not args.quiet, options=options)

@@ -23,7 +23,7 @@ from test_runner import small_mission
 from autonomy.policy import load_policy
 from autonomy.recorder import PartialReport
 from missions.mission_writer import save_mission
-from simulation.mission_replay import replay_mission
+from simulation.mission_replay import DEFAULT_START_TIME, replay_mission, unix_microseconds
 
 HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
 
@@ -97,7 +97,8 @@ def test_sigkill_mid_replay_leaves_a_readable_tlog_and_a_partial_report(tmp_path
     save_mission(small_mission(max_steps=3000), mission)  # far longer than the test waits
     out = tmp_path / "out"
     process = subprocess.Popen([*HRLSAC, "mission", "replay", str(mission), "--policy", PRETRAINED, "--out", str(out),
-                                "--no-video", "--quiet", "--accept-flight-mismatch"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                "--no-video", "--quiet", "--accept-flight-mismatch"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     tlog, report = out / "flight.tlog", out / "report.json"
     try:
         deadline = time.monotonic() + 120.0  # bounded: imports, then a few seconds of flying
@@ -115,8 +116,9 @@ def test_sigkill_mid_replay_leaves_a_readable_tlog_and_a_partial_report(tmp_path
     assert process.returncode == -signal.SIGKILL
     messages = tlog_messages(tlog)
     assert len(messages) > 1000
-    stamps = np.array([m._timestamp for m in messages])
-    assert np.all(np.diff(stamps) >= 0) and stamps[0] >= 0  # the run's clock, monotonic up to the kill
+    # the run's clock from the replay's start time, monotonic up to the kill
+    stamps = np.array([m._timestamp for m in messages]) - unix_microseconds(DEFAULT_START_TIME) / 1e6
+    assert np.all(np.diff(stamps) >= 0) and stamps[0] >= 0
     assert {"HEARTBEAT", "GLOBAL_POSITION_INT", "COMMAND_LONG"} <= {m.get_type() for m in messages}
     partial = json.loads(report.read_text())  # valid JSON: written by rename, never torn
     assert partial["complete"] is False and partial["transitions"][0]["to"] == "CONNECT"

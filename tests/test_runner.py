@@ -13,12 +13,14 @@ import dataclasses
 import inspect
 import json
 import math
+import os
 import re
 import signal
 import subprocess
 import sys
 import textwrap
 import time
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +38,7 @@ from missions.scenario import Scenario, SearchArea, Target
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import export_policy
 from policies.training.trainer import Trainer
-from simulation.mission_replay import replay_mission
+from simulation.mission_replay import DEFAULT_START_TIME, replay_mission, unix_microseconds
 
 FLIGHT = FlightSettings(altitude_m=20.0, max_speed_mps=8.0, max_steps=40, subgoal_interval=10)
 NET = NetworkConfig(hidden=(32, 32))
@@ -79,12 +81,15 @@ def searched_to_its_own_end(report: dict) -> bool:
     return report["search_end"] is not None and not report["search_end"].startswith(LINK_OR_VEHICLE_ENDS)
 
 
-def read_tlog(path: Path) -> list:
-    """Every message of a tlog, with ``_timestamp`` in seconds (the runner's clock)."""
+def read_tlog(path: Path, start_time: datetime = DEFAULT_START_TIME) -> list:
+    """Every message of a tlog, with ``_timestamp`` in seconds of the runner's clock (the tlog's stamps count from
+    the replay's ``start_time``)."""
     log = mavutil.mavlink_connection(str(path), dialect="common")
+    start_s = unix_microseconds(start_time) / 1e6
     messages = []
     while (msg := log.recv_match()) is not None:
         if msg.get_type() != "BAD_DATA":
+            msg._timestamp -= start_s
             messages.append(msg)
     return messages
 
@@ -287,9 +292,35 @@ def test_replays_of_many_episodes_show_their_progress_on_stderr_unless_quiet(pol
         assert (tmp_path / "shown" / name).read_bytes() == (tmp_path / "quiet" / name).read_bytes()
 
 
+def gpx_times(tlog: Path) -> list[datetime]:
+    """The times of the track points pymavlink's mavtogpx.py writes for a tlog (it formats them in local time)."""
+    subprocess.run([sys.executable, str(Path(sys.executable).parent / "mavtogpx.py"), str(tlog)], check=True,
+                   capture_output=True, env={**os.environ, "TZ": "UTC"}, timeout=120)
+    text = Path(f"{tlog}.gpx").read_text()
+    return [datetime.fromisoformat(t) for t in re.findall(r"<time>([^<]+)</time>", text)]
+
+
+@pytest.mark.parametrize("start", [None, "2026-03-14T09:26:53Z"])
+def test_a_replay_tlog_is_dated_from_its_start_time(policy, mission_file, tmp_path, start):
+    """``--start-time`` (default: the fixed DEFAULT_START_TIME, so that replays stay byte-identical) is the moment
+    the tlog's simulated time 0 stands for: the GPX track of the flight carries that date."""
+    given = ["--start-time", start] if start else []
+    result = subprocess.run([*HRLSAC, "mission", "replay", str(mission_file), "--policy", str(policy.path),
+                             "--out", str(tmp_path), "--no-video", "--quiet", *given],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    begins = datetime.fromisoformat(start) if start else DEFAULT_START_TIME
+    flight_time_s = json.loads((tmp_path / "report.json").read_text())["flight_time_s"]
+    times = gpx_times(tmp_path / "flight.tlog")
+    assert len(times) > 100 and times == sorted(times)
+    assert begins <= times[0] and (times[-1] - begins).total_seconds() <= flight_time_s
+
+
 @pytest.mark.parametrize("change, message", [
     (("--policy", "missing.pt"), "missing.pt: no such file"),
     (("--episodes", "0"), "--episodes must be in [1, 100000], got 0"),
+    (("--start-time", "yesterday"), "--start-time must be an ISO 8601 date and time from 1970 on, e.g. "
+                                    "2025-06-01T14:30:00Z, got 'yesterday'"),
 ])
 def test_mission_command_turns_bad_input_into_one_line(policy, mission_file, change, message):
     args = {"--policy": str(policy.path), "--episodes": "1"}
