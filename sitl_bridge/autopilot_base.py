@@ -1,9 +1,10 @@
 """What the simulated autopilot personalities (PX4, ArduPilot Copter) share.
 
 Each personality (:class:`sitl_bridge.px4.autopilot.Px4Autopilot` for PX4,
-:class:`sitl_bridge.ardupilot.autopilot.ArduCopter`) is a subclass of :class:`AutopilotBase`. The vehicle talks to both through the same methods: ``handle_command``,
-``handle_setpoint``, ``handle_set_mode_message``, ``on_heartbeat``, ``guidance``, ``landed_state``,
-``prearm_failure``, ``heartbeat_fields`` and ``battery_charge_state``. No I/O and no MAVLink encoding happens here.
+:class:`sitl_bridge.ardupilot.autopilot.ArduCopter` for ArduPilot Copter) is a subclass of :class:`AutopilotBase`.
+The vehicle talks to both through the same methods: ``handle_command``, ``handle_setpoint``,
+``handle_set_mode_message``, ``on_heartbeat``, ``guidance``, ``landed_state``, ``prearm_failure``,
+``heartbeat_fields`` and ``battery_charge_state``. No I/O and no MAVLink encoding happens here.
 
 :class:`FlightStatus` is the personality-neutral view of "what is the autopilot doing" for code that must judge a
 flight without knowing PX4 or ArduPilot modes (``simulation.flight_outcome``): read ``vehicle.autopilot.status``.

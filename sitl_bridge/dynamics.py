@@ -22,8 +22,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sitl_bridge.airborne import (airborne_power_w, battery_after, clamp_velocity, clamp_yaw_rate, fly_airborne,
-                                  may_touch_down, touchdown_time, turn_at, turn_toward)
+from sitl_bridge.airborne import (
+    airborne_power_w,
+    battery_after,
+    clamp_velocity,
+    clamp_yaw_rate,
+    fly_airborne,
+    may_touch_down,
+    touchdown_time,
+    turn_at,
+    turn_toward,
+)
 from sitl_bridge.multirotor import GRAVITY_MPS2, HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.scalar_math import wrap_angle
 from sitl_bridge.wind import Wind, gust_drift

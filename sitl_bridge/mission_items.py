@@ -45,7 +45,8 @@ def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, 
     if as_int:
         x, y = (_int32(x * 1e7), _int32(y * 1e7)) if item.positional else (_int32(x), _int32(y))
         return mavlink.MAVLink_mission_item_int_message(*target, seq, frame, item.command, int(current),
-                                                        int(item.autocontinue), *item.params, x, y, item.z, mission_type)
+                                                        int(item.autocontinue), *item.params, x, y, item.z,
+                                                        mission_type)
     return mavlink.MAVLink_mission_item_message(*target, seq, frame, item.command, int(current),
                                                 int(item.autocontinue), *item.params, x, y, item.z, mission_type)
 

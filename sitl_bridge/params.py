@@ -78,8 +78,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("GF_MAX_VER_DIST", REAL32, 0.0, 0.0, 10000.0, "geofence: largest altitude above home (m); 0 off"),
     # PX4 returns at 60 m; the simulated missions fly low over the sea, so 30 m keeps RTLs short.
     ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0, "RTL climbs to at least this altitude above home (m)"),
-    # The battery thresholds' defaults and bounds are PX4's (src/lib/battery/battery_params.c, @min / @max; checked
-    # 2026-12-07 against the generated parameter file, where BAT_CRIT_THR and BAT_EMERGEN_THR go up to 0.5).
+    # The battery thresholds' defaults and bounds are PX4's (src/lib/battery/battery_params.c, @min / @max, as the
+    # generated parameter file has them: BAT_CRIT_THR and BAT_EMERGEN_THR go up to 0.5).
     ParamSpec("BAT_LOW_THR", REAL32, 0.15, 0.12, 0.5, "battery fraction below which PX4 warns (Low battery)"),
     ParamSpec("BAT_CRIT_THR", REAL32, 0.07, 0.05, 0.5,
               "battery fraction below which the critical level's COM_LOW_BAT_ACT action runs"),

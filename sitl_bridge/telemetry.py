@@ -56,9 +56,9 @@ class TelemetrySource(Protocol):
 
 class MissionReports:
     """MISSION_CURRENT and MISSION_ITEM_REACHED as mavlink_mission.cpp's send() paces them: MISSION_CURRENT at once
-    when the current item changes and at 1 Hz, MISSION_ITEM_REACHED for each item reached and the last one again at 1 Hz,
-    ten more times. PX4 also sends MISSION_CURRENT (total 65535) without a mission; this simulator stays silent
-    then, so that flights without a mission send exactly what they sent before missions were emulated."""
+    when the current item changes and at 1 Hz, MISSION_ITEM_REACHED for each item reached and the last one again at
+    1 Hz, ten more times. PX4 also sends MISSION_CURRENT (total 65535) without a mission; this simulator stays
+    silent then, so that a flight without a mission carries no mission messages."""
 
     REPEATS = 10
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from missions.geodesy import GeoPoint
 from mavlink_signing import KEY_BYTES
+from missions.geodesy import GeoPoint
 from missions.validation import check_fields, check_number
 from sitl_bridge.multirotor import MultirotorParams
 from sitl_bridge.sensors import SensorConfig

@@ -452,7 +452,8 @@ def test_battery_failsafe_low_voltage_for_batt_low_timer_returns():
 
 def test_batt_monitor_0_hides_the_battery_parameters_and_turns_the_battery_failsafe_off():
     """AP_BattMonitor_Params.cpp: BATT_MONITOR carries AP_PARAM_FLAG_ENABLE, so at 0 the other BATT_* are not listed,
-    not answered and not settable, SYS_STATUS reports no battery (0 V, -1 A, -1 %, not enabled) and nothing fails safe on it."""
+    not answered and not settable, SYS_STATUS reports no battery (0 V, -1 A, -1 %, not enabled) and nothing fails safe
+    on it."""
     pilot = airborne({"BATT_MONITOR": 0, "BATT_LOW_VOLT": 16.75, "BATT_FS_LOW_ACT": 2})  # monitored: RTL within 60 s
     before = len(pilot.received)
     pilot.mav.param_request_list_send(1, 1)

@@ -103,7 +103,8 @@ def test_a_lying_length_byte_does_not_swallow_the_next_datagram():
 def vehicle_heartbeat(sequence: int, key: bytes | None = None) -> bytes:
     mav = fuzz.encoder(1, 1, key)
     mav.seq = sequence % 256
-    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 3, 3).pack(mav)
+    heartbeat = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 3, 3)
+    return heartbeat.pack(mav)
 
 
 @FUZZ

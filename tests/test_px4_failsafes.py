@@ -1,6 +1,6 @@
-"""The simulated PX4's failsafe reaction (sitl_bridge/px4/failsafes.py), flown in lockstep with pymavlink: COM_FAIL_ACT_T's
-Hold before a geofence or battery Return / Land, a mode switch during it as a user takeover, and the battery failsafe
-with COM_LOW_BAT_ACT (PX4's default only warns), each with the STATUSTEXTs PX4 sends."""
+"""The simulated PX4's failsafe reaction (sitl_bridge/px4/failsafes.py), flown in lockstep with pymavlink:
+COM_FAIL_ACT_T's Hold before a geofence or battery Return / Land, a mode switch during it as a user takeover, and the
+battery failsafe with COM_LOW_BAT_ACT (PX4's default only warns), each with the STATUSTEXTs PX4 sends."""
 from __future__ import annotations
 
 import dataclasses
@@ -43,7 +43,8 @@ def stamp_heartbeats(monkeypatch):
 
 def set_battery(pilot: LockstepPilot, fraction: float) -> None:
     vehicle = pilot.vehicle
-    vehicle.state = dataclasses.replace(vehicle.state, battery_wh=fraction * vehicle.config.airframe.battery_capacity_wh)
+    capacity_wh = vehicle.config.airframe.battery_capacity_wh
+    vehicle.state = dataclasses.replace(vehicle.state, battery_wh=fraction * capacity_wh)
 
 
 def test_a_geofence_return_holds_com_fail_act_t_first_then_returns():

@@ -126,8 +126,10 @@ def rates_per_link(profile: str, seconds: float = 4.0) -> dict[str, dict[str, fl
 def test_px4_profile_streams_onboard_rates_on_the_api_link_and_normal_rates_on_the_gcs_link():
     rates = rates_per_link("px4")
     api, gcs = rates["api"], rates["gcs"]
-    assert api["GLOBAL_POSITION_INT"] == pytest.approx(50, abs=1) and gcs["GLOBAL_POSITION_INT"] == pytest.approx(5, abs=0.5)
-    assert api["LOCAL_POSITION_NED"] == pytest.approx(30, abs=1) and gcs["LOCAL_POSITION_NED"] == pytest.approx(1, abs=0.3)
+    assert api["GLOBAL_POSITION_INT"] == pytest.approx(50, abs=1)
+    assert gcs["GLOBAL_POSITION_INT"] == pytest.approx(5, abs=0.5)
+    assert api["LOCAL_POSITION_NED"] == pytest.approx(30, abs=1)
+    assert gcs["LOCAL_POSITION_NED"] == pytest.approx(1, abs=0.3)
     assert api["ATTITUDE"] == pytest.approx(100, abs=1) and gcs["ATTITUDE"] == pytest.approx(15, abs=1)
     assert api["HEARTBEAT"] == pytest.approx(1, abs=0.3) and gcs["BATTERY_STATUS"] == pytest.approx(0.5, abs=0.3)
 

@@ -1,6 +1,6 @@
 """ArduCopter's AUTO mode: flying the uploaded mission command by command.
 
-A mixin of :class:`sitl_bridge.ardupilot.ArduCopter`. Read in ArduPilot master at 9070097 (docs/sitl.md,
+A mixin of :class:`sitl_bridge.ardupilot.autopilot.ArduCopter`. Read in ArduPilot master at 9070097 (docs/sitl.md,
 "ArduPilot missions"): ``ArduCopter/mode_auto.cpp`` (``init``, ``run``, ``exit_mission``, ``do_*`` / ``verify_*``),
 ``libraries/AP_Mission/AP_Mission.cpp`` (``start_or_resume``, ``set_current_cmd``, ``start_command``'s texts),
 ``GCS_MAVLink_Copter.cpp`` (MISSION_START, ``mission_state``), ``AP_Arming_Copter.cpp``, ``Parameters.cpp``

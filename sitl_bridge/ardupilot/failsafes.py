@@ -1,7 +1,7 @@
 """ArduCopter's failsafes as far as they matter to a companion computer: GCS (link) loss and the battery.
 
-A mixin of :class:`sitl_bridge.ardupilot.ArduCopter` (it uses the autopilot's params, mode and events). Checked
-against ArduPilot's ArduCopter/events.cpp (Copter::failsafe_gcs_check, failsafe_gcs_on_event,
+A mixin of :class:`sitl_bridge.ardupilot.autopilot.ArduCopter` (it uses the autopilot's params, mode and events).
+Checked against ArduPilot's ArduCopter/events.cpp (Copter::failsafe_gcs_check, failsafe_gcs_on_event,
 handle_battery_failsafe, announce_failsafe, do_failsafe_action, should_disarm_on_failsafe),
 libraries/GCS_MAVLink (GCS_MAVLINK::handle_heartbeat: only SYSID_MYGCS counts) and
 libraries/AP_BattMonitor/AP_BattMonitor.cpp (check_failsafes and its "Battery 1 is low ..." text).

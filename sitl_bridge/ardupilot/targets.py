@@ -1,8 +1,8 @@
 """How ArduCopter takes GUIDED targets from a companion computer: SET_POSITION_TARGET_LOCAL_NED and _GLOBAL_INT,
 and "guided mode" mission items (MISSION_ITEM(_INT) with current = 2).
 
-A mixin of :class:`sitl_bridge.ardupilot.ArduCopter` (it uses the autopilot's mode, params, setpoint, hold target
-and home); docs/sitl.md ("GUIDED", "ArduPilot: what was checked") lists the rules and their sources.
+A mixin of :class:`sitl_bridge.ardupilot.autopilot.ArduCopter` (it uses the autopilot's mode, params, setpoint, hold
+target and home); docs/sitl.md ("GUIDED", "ArduPilot: what was checked") lists the rules and their sources.
 """
 from __future__ import annotations
 
@@ -12,8 +12,18 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.autopilot_base import (
-    ABOVE_HOME_FRAMES, AMSL_FRAMES, MASK_ACCELERATION, MASK_FORCE, MASK_POSITION, MASK_VELOCITY, MASK_YAW,
-    MASK_YAW_RATE, TERRAIN_FRAMES, Setpoint, body_to_ned)
+    ABOVE_HOME_FRAMES,
+    AMSL_FRAMES,
+    MASK_ACCELERATION,
+    MASK_FORCE,
+    MASK_POSITION,
+    MASK_VELOCITY,
+    MASK_YAW,
+    MASK_YAW_RATE,
+    TERRAIN_FRAMES,
+    Setpoint,
+    body_to_ned,
+)
 from sitl_bridge.multirotor import VehicleState
 
 GUIDED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED, mavlink.MAV_FRAME_BODY_NED,

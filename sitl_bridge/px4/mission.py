@@ -8,7 +8,8 @@ missions", has the line references):
   already); it marks the mission invalid, so Mission mode cannot be entered armed, arming in it is refused, and
   MAV_CMD_MISSION_START is DENIED. Checked here: a position fix (home), a takeoff above home and before any other
   position item, no landing as the first item while landed, every position item inside the geofence
-  (GF_MAX_HOR_DIST / GF_MAX_VER_DIST and the uploaded areas, whatever GF_ACTION says). A first waypoint further than MIS_DIST_1WP from home only warns.
+  (GF_MAX_HOR_DIST / GF_MAX_VER_DIST and the uploaded areas, whatever GF_ACTION says). A first waypoint further
+  than MIS_DIST_1WP from home only warns.
 * **flying it** (``mission_base.cpp``, ``mission.cpp``, ``mission_block.cpp``): starting below the next position
   item's altitude, PX4 first climbs straight up to it (a takeoff when landed; no MISSION_ITEM_REACHED for that
   climb), then flies each item: a position item is reached within its param2 (else NAV_ACC_RAD) horizontally and

@@ -10,7 +10,14 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.autopilot_base import (
-    MASK_ACCELERATION, MASK_POSITION, MASK_VELOCITY, MASK_YAW, MASK_YAW_RATE, Setpoint, body_to_ned)
+    MASK_ACCELERATION,
+    MASK_POSITION,
+    MASK_VELOCITY,
+    MASK_YAW,
+    MASK_YAW_RATE,
+    Setpoint,
+    body_to_ned,
+)
 from sitl_bridge.multirotor import VehicleState
 
 PX4_GLOBAL_FRAMES = (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.multirotor import MultirotorParams, VelocityCommand, VehicleState
+from sitl_bridge.multirotor import MultirotorParams, VehicleState, VelocityCommand
 
 RADIUS_MIN_M = 1.0
 VELOCITY_MAX_MPS = 10.0
