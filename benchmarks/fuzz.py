@@ -4,7 +4,7 @@ The receive paths:
   * vehicle: ``SimulatedVehicle.receive`` (pymavlink parsing, signing checks, every message handler), with the
     physics stepped every few frames so hostile commands are also flown; once without and once with a signing
     key (with a key nothing fuzzed may arm it or change its mode: the fuzzer does not have the key), and the
-    ArduCopter personality without (its own mission protocol and modes);
+    ArduCopter personality without (its own mission, fence and rally protocols and modes);
   * runner: ``autonomy.vehicle_time.receive_telemetry`` (the companion computer's pymavlink connection, VehicleLink,
     the Kalman filter) plus every reading the runner's state machine takes from the link.
 
@@ -70,6 +70,14 @@ KNOWN_COMMANDS = (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_DO_SET_M
                   mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE,
                   mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_MISSION_START)
 PLAUSIBLE_PARAMS = (1.0, 0.0, 1.0, 4.0, 6.0, 3.0, 2.0, 33.0, 24.0, 500.0)  # arm, custom-mode numbers, msg ids
+# Mission items' commands and types: the mission, fence and rally uploads both personalities parse.
+ITEM_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
+                 mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_CHANGE_SPEED,
+                 mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+                 mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+                 mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT, mavlink.MAV_CMD_NAV_RALLY_POINT)
+MISSION_TYPES = (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY,
+                 mavlink.MAV_MISSION_TYPE_ALL)
 
 
 class _NoFile:
@@ -112,7 +120,9 @@ def hostile_message(rng: random.Random, name: str | None = None) -> mavlink.MAVL
         if field_name in ("target_system", "target_component") and rng.random() < 0.5:
             values[-1] = 1 if field_name == "target_system" else rng.choice((0, 1))
         elif field_name == "command" and rng.random() < 0.8:
-            values[-1] = rng.choice(KNOWN_COMMANDS)
+            values[-1] = rng.choice(ITEM_COMMANDS if cls.msgname.startswith("MISSION_ITEM") else KNOWN_COMMANDS)
+        elif field_name == "mission_type" and rng.random() < 0.8:
+            values[-1] = rng.choice(MISSION_TYPES)
         elif field_name.startswith("param") and fieldtype == "float" and rng.random() < 0.4:
             values[-1] = rng.choice(PLAUSIBLE_PARAMS)
     return cls(*values)
@@ -185,7 +195,7 @@ def fuzz_frame(rng: random.Random, frames: list[bytes]) -> tuple[str, bytes]:
 # ---------------------------------------------------------------------------------------------- targets
 class VehicleTarget:
     """The vehicle's receive path on one in-memory link; ``signing_key`` turns signing on; ``autopilot`` picks the
-    personality (its own mission protocol and modes)."""
+    personality (its own mission, fence and rally protocols and modes)."""
 
     def __init__(self, signing_key: bytes | None = None, seed: int = 0, autopilot: str = "px4"):
         self.vehicle_end, self.client_end = memory_link_pair("fuzz")
@@ -415,9 +425,9 @@ def run(frames: int, seed: int, progress: bool = True) -> dict:
     return {"frames": frames, "seed": seed, "wall_s": round(time.perf_counter() - started, 1),
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "mutations": by_mutation, "targets": stats, "examples": examples,
-            "note": "decoded: messages pymavlink decoded (a fuzzed frame may hold none or several); rejected: pymavlink "
-                    "bad-data events (one frame may make several), frames dropped by signing and (vehicle) partial "
-                    "frames dropped at the end of a datagram; counts are of the last target instance (a target "
+            "note": "decoded: messages pymavlink decoded (a fuzzed frame may hold none or several); rejected: "
+                    "pymavlink bad-data events (one frame may make several), frames dropped by signing and (vehicle) "
+                    "partial frames dropped at the end of a datagram; counts are of the last target instance (a target "
                     "restarts after an invariant violation)"}
 
 

@@ -5,7 +5,8 @@ pick a velocity command, advance the dynamics and sensors, then send the telemet
 same method runs in lockstep (the caller steps) and in real time (:mod:`sitl_bridge.server` paces it).
 
 The autopilot is PX4 (:class:`sitl_bridge.px4.autopilot.Px4Autopilot`) or ArduPilot Copter
-(:class:`sitl_bridge.ardupilot.ArduCopter`), chosen by ``VehicleConfig.autopilot``; both share everything else.
+(:class:`sitl_bridge.ardupilot.autopilot.ArduCopter`), chosen by ``VehicleConfig.autopilot``; both share everything
+else.
 Realism options: the autopilot may have booted long before the simulation starts (``boot_time_s``) and may reboot
 mid-flight (``reboot_at_s``): the links go silent, the motors stop (an airborne vehicle falls), and the autopilot
 comes back disarmed in its boot mode with ``time_boot_ms`` restarting and home and the local origin re-set where
@@ -18,18 +19,21 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from missions.geodesy import GeoPoint, LocalFrame
 from mavlink_signing import LinkSigning, simulated_timestamp
+from missions.geodesy import GeoPoint, LocalFrame
 from sitl_bridge import dynamics, telemetry
 from sitl_bridge.ardupilot.autopilot import ArduCopter
+from sitl_bridge.ardupilot.fence_protocol import CopterFenceTransfer
+from sitl_bridge.ardupilot.item_protocol import CopterTransfers
 from sitl_bridge.ardupilot.mission_protocol import CopterMissionTransfer
 from sitl_bridge.ardupilot.params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
-from sitl_bridge.px4.autopilot import Px4Autopilot
+from sitl_bridge.ardupilot.rally import CopterRallyTransfer
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
 from sitl_bridge.endpoint import Endpoint
 from sitl_bridge.link import Link
-from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.params import ParameterStore
+from sitl_bridge.px4.autopilot import Px4Autopilot
+from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.sensors import SensorSuite
 from sitl_bridge.signing import vehicle_signing
 from sitl_bridge.telemetry_profiles import link_rates_hz, resolve_profile
@@ -89,14 +93,14 @@ class SimulatedVehicle(MessageHandlers):
         self.setup_signing_refused = 0
         if config.signing_key is not None:
             self._enable_signing(config.signing_key)
-        # PX4's mission protocol (the ArduPilot personality answers guided-mode items only): the stored mission and
-        # fence outlive a reboot, as PX4's dataman does
+        # PX4's mission protocol: the stored mission, fence and rally points outlive a reboot, as PX4's dataman does
         self.missions: MissionTransfer | None = None if self.is_ardupilot else MissionTransfer(
             on_mission=lambda items, current: self.autopilot.load_mission(items, current, self.time_s, self.state),
             on_fence=lambda items: self.autopilot.load_fence(items, self.time_s, self.state),
             current_seq=lambda: self.autopilot.mission_current,
             set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
-            text=lambda text, severity: self.autopilot._event(self.time_s, text, severity))
+            text=self._autopilot_text,
+            on_rally=lambda items: self.autopilot.load_rally(items))
         self.mission_reports = telemetry.MissionReports()
         self.copter_missions: CopterMissionTransfer | None = CopterMissionTransfer(
             home=lambda: (self.home.lat_deg, self.home.lon_deg, self.home.alt_m) if self.autopilot.gps_ok else None,
@@ -104,8 +108,14 @@ class SimulatedVehicle(MessageHandlers):
             on_mission=lambda items: self.autopilot.load_auto_mission(items, self.time_s, self.state),
             set_current=lambda seq: self.autopilot.set_mission_current(seq, self.time_s, self.state),
             send_current=lambda seq: self.broadcast(telemetry.mission_current(self, seq)),
-            text=lambda text, severity: self.autopilot._event(self.time_s, text, severity),
+            text=self._autopilot_text,
         ) if self.is_ardupilot else None
+        # ArduPilot's fence and rally storage, each with its own transfers (they too outlive a reboot)
+        self.copter_transfers: CopterTransfers | None = CopterTransfers(
+            self.copter_missions,
+            CopterFenceTransfer(lambda items: self.autopilot.load_polyfence(items), self._autopilot_text),
+            CopterRallyTransfer(lambda items: self.autopilot.load_rally(items), self._autopilot_text),
+        ) if self.copter_missions is not None else None
         self._handlers = self.handlers()
         self._boot_tick = -int(round(config.boot_time_s * config.physics_rate_hz))  # the tick the autopilot booted
         self._reboot_tick = None if config.reboot_at_s is None else int(round(config.reboot_at_s / self.dt_s))
@@ -228,8 +238,8 @@ class SimulatedVehicle(MessageHandlers):
         manager does; ArduPilot's MISSION_ITEM_REACHED at once on every link (its MISSION_CURRENT streams with
         EXT_STAT)."""
         now, ap = self.time_s, self.autopilot
-        if self.copter_missions is not None:
-            self.copter_missions.tick(now)
+        if self.copter_transfers is not None:
+            self.copter_transfers.tick(now)
             for seq in ap.auto_reached_news:
                 self.broadcast(mavlink.MAVLink_mission_item_reached_message(seq))
             ap.auto_reached_news.clear()
@@ -243,6 +253,10 @@ class SimulatedVehicle(MessageHandlers):
             self.broadcast(msg)
         if ap.events:  # the transfer's texts ("Operation timeout")
             self._flush_events()
+
+    def _autopilot_text(self, text: str, severity: int) -> None:
+        """A STATUSTEXT the autopilot sends (the mission protocols' texts)."""
+        self.autopilot._event(self.time_s, text, severity)
 
     def broadcast(self, msg: mavlink.MAVLink_message) -> None:
         """Send one message on every link."""
@@ -293,12 +307,15 @@ class SimulatedVehicle(MessageHandlers):
         self.origin_ned = here
         self._set_home(here)
         self.autopilot.home_changed = False  # just announced
-        if self.copter_missions is not None:  # ArduPilot keeps its mission in storage too
-            self.copter_missions.upload = None
+        if self.copter_transfers is not None:  # ArduPilot keeps its mission, fence and rally points in storage too
+            self.copter_transfers.cancel_uploads()
             self.autopilot.load_auto_mission(self.copter_missions.items, self.time_s, state)
-        if self.missions is not None:  # a transfer does not survive the reboot; the stored mission and fence do
+            self.autopilot.load_polyfence(self.copter_transfers.fence.items)
+            self.autopilot.load_rally(self.copter_transfers.rally.items)
+        if self.missions is not None:  # a transfer does not survive the reboot; what is stored does
             self.missions.transfer = None
             self.autopilot.load_fence(self.missions.fence, self.time_s, state)
+            self.autopilot.load_rally(self.missions.rally)
             if self.missions.items:
                 self.autopilot.load_mission(self.missions.items, current, self.time_s, state)
         self.log(f"autopilot booted at {self.time_s:.2f} s; home and origin re-set at "

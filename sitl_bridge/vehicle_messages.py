@@ -11,14 +11,15 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_bridge import telemetry
 from mavlink_signing import LinkSigning
-from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
+from sitl_bridge import telemetry
+from sitl_bridge.ardupilot.item_protocol import CopterTransfers
 from sitl_bridge.ardupilot.mission_protocol import CopterMissionTransfer
+from sitl_bridge.autopilot_base import ACCEPTED, DENIED, FAILED, AutopilotBase, as_int
 from sitl_bridge.endpoint import AUTOPILOT_COMPONENT, Endpoint
-from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.multirotor import VehicleState
 from sitl_bridge.params import ParameterStore, decode_bytewise, decode_float, encode_bytewise
+from sitl_bridge.px4.mission_protocol import MissionTransfer
 from sitl_bridge.signing import requested_key
 from sitl_bridge.telemetry_profiles import ARDUPILOT_STREAM_MESSAGES, DATA_STREAM_GROUPS, STREAM_GROUPS
 from sitl_bridge.vehicle_config import VehicleConfig
@@ -44,6 +45,7 @@ class MessageHandlers:
     signing: LinkSigning | None
     missions: MissionTransfer | None
     copter_missions: CopterMissionTransfer | None
+    copter_transfers: CopterTransfers | None
     setup_signing_refused: int
     is_ardupilot: bool
     dt_s: float
@@ -70,12 +72,12 @@ class MessageHandlers:
         if self.is_ardupilot:  # PX4 implements neither REQUEST_DATA_STREAM nor guided-mode mission items
             table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
             table["MISSION_ITEM_INT"] = table["MISSION_ITEM"] = self._on_mission_item
-        if self.copter_missions is not None:  # ArduPilot's mission protocol (sitl_bridge.ardupilot.mission_protocol)
-            c = self.copter_missions
+        if self.copter_transfers is not None:  # ArduPilot's mission item protocols (sitl_bridge.ardupilot)
+            c = self.copter_transfers
             for name, method in (("MISSION_COUNT", c.on_count), ("MISSION_REQUEST_INT", c.on_request),
                                  ("MISSION_REQUEST", c.on_request), ("MISSION_ACK", c.on_ack),
                                  ("MISSION_REQUEST_LIST", c.on_request_list), ("MISSION_CLEAR_ALL", c.on_clear_all),
-                                 ("MISSION_SET_CURRENT", c.on_set_current)):
+                                 ("MISSION_SET_CURRENT", self.copter_missions.on_set_current)):
                 table[name] = self._mission_handler(method, (AUTOPILOT_COMPONENT,))
         elif self.missions is not None:  # PX4: the mission protocol (sitl_bridge.px4.mission_protocol)
             m = self.missions
@@ -229,15 +231,15 @@ class MessageHandlers:
     def _on_timesync(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         if msg.tc1 == 0:  # a request: answer with our time since boot in ns
             # The target fields stay 0, as both autopilots leave them (PX4 mavlink_timesync.cpp and ArduPilot
-            # GCS_Common.cpp handle_timesync fill tc1 and ts1 only); checked 2026-12-07.
+            # GCS_Common.cpp handle_timesync fill tc1 and ts1 only).
             endpoint.send(mavlink.MAVLink_timesync_message(int(self.time_since_boot_s * 1e9), msg.ts1))
 
     def _on_mission_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
-        """ArduPilot: an item of a mission upload, or a guided-mode waypoint (current 2 or 3), answered with
-        MISSION_ACK."""
+        """ArduPilot: an item of a mission, fence or rally upload, or a guided-mode waypoint (current 2 or 3),
+        answered with MISSION_ACK."""
         if not self._for_us(msg):
             return
-        if self.copter_missions is not None and self.copter_missions.on_item(endpoint, msg, self.time_s):
+        if self.copter_transfers is not None and self.copter_transfers.on_item(endpoint, msg, self.time_s):
             return
         if msg.get_type() == "MISSION_ITEM":  # floats in degrees: ArduPilot converts them to the _INT form
             # (a NaN or infinite one fails check_lat / check_lng: out of range here too)

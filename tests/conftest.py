@@ -18,7 +18,6 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
 import pytest  # noqa: E402
 
-
 PORT_RANGE = (20_000, 60_000)
 """UDP ports the tests take theirs from, split between the pytest-xdist workers."""
 _ports_handed_out = itertools.count()
@@ -51,6 +50,17 @@ def free_udp_ports(count: int) -> list[int]:
 @pytest.fixture
 def udp_ports() -> list[int]:
     return free_udp_ports(4)
+
+
+@pytest.fixture
+def pilot():
+    """A lockstep pymavlink client of a simulated PX4 (seed 1) that has its GPS fix (sitl_bridge.scripted_flight)."""
+    from sitl_bridge.scripted_flight import LockstepPilot
+    from sitl_bridge.vehicle import VehicleConfig
+
+    p = LockstepPilot.create(VehicleConfig(seed=1))
+    p.wait_for(lambda: p.vehicle.autopilot.gps_ok, 2.0, "GPS")
+    return p
 
 
 class UdpClient:

@@ -1,18 +1,21 @@
-"""ArduCopter's mission protocol and AUTO mode, over the in-memory link with a pymavlink client in lockstep.
+"""ArduCopter's mission protocol and AUTO mode, its fence and rally uploads, over the in-memory link with a pymavlink
+client in lockstep.
 
 What ArduPilot does is in sitl_bridge/ardupilot/mission_protocol.py and sitl_bridge/ardupilot/auto.py (docs/sitl.md,
 "ArduPilot missions"): item 0 is home, uploads are answered with MISSION_REQUEST, a second a request, 8 s to give
 up; AUTO is not armable, needs a takeoff first when armed on the ground, takes off on MISSION_START, announces each
-command, holds at the end in the air, and disarms after a LAND.
+command, holds at the end in the air, and disarms after a LAND. The FENCE type (sitl_bridge/ardupilot/
+fence_protocol.py) is validated as a whole when the last item arrives; the RALLY type (sitl_bridge/ardupilot/
+rally.py) is written point by point, and RTL goes to the closest rally point as AP_Rally chooses it.
 """
 from __future__ import annotations
 
 import math
 
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
-
 from test_ardupilot_vehicle import ACCEPTED, ARM, FAILED, airborne, copter, texts
-from test_px4_mission import upload  # the same client side: answer each request until the MISSION_ACK
+from test_px4_mission import fence_item, rally_point, square_fence, upload  # the same client side
 
 from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.scripted_flight import LockstepPilot
@@ -173,3 +176,110 @@ def test_leaving_auto_and_coming_back_flies_the_current_command_again():
     assert v.autopilot.nav_index == 1
     pilot.wait_for(lambda: v.autopilot.mission_state == "complete", 60.0, "the mission again")
     assert math.hypot(v.state.north_m - 60.0, v.state.east_m) < 2.5
+
+
+# ------------------------------------------------------------------ fences and rally points
+FENCE, RALLY = mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY
+INCLUSION_VERTEX = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+
+
+def download(pilot: LockstepPilot, mission_type: int, request=None) -> list:
+    """MISSION_REQUEST_LIST, then each item with MISSION_REQUEST_INT (or ``request``'s message)."""
+    pilot.mav.mission_request_list_send(1, 1, mission_type)
+    count = pilot.wait_message("MISSION_COUNT", match=lambda m: m.mission_type == mission_type).count
+    got = []
+    for seq in range(count):
+        (request or pilot.mav.mission_request_int_send)(1, 1, seq, mission_type)
+        got.append(pilot.wait_message(("MISSION_ITEM" if request else "MISSION_ITEM_INT"),
+                                      match=lambda m, s=seq: m.seq == s))
+    return got
+
+
+def test_a_fence_upload_is_validated_as_a_whole_downloaded_and_cleared():
+    pilot = copter()
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 3.0, "GPS")
+    stored = pilot.vehicle.copter_transfers.fence
+    fence = square_fence(pilot, half_m=40.0, no_go=(10.0, 10.0, 5.0))
+    result, requests = upload(pilot, fence, mission_type=FENCE)
+    assert result == mavlink.MAV_MISSION_ACCEPTED
+    assert [(r.get_type(), r.mission_type) for r in requests] == [("MISSION_REQUEST", FENCE)] * 5
+    assert [(a.inclusion, a.centre is None) for a in pilot.vehicle.autopilot.polyfence_areas] == [
+        (True, True), (False, False)]
+    got = download(pilot, FENCE)
+    assert [(m.command, m.frame, m.param1, m.x, m.y, m.z, m.autocontinue) for m in got] == [
+        (sent.command, mavlink.MAV_FRAME_GLOBAL, sent.param1, sent.x, sent.y, 0.0, 0) for sent in fence]
+    as_float = download(pilot, FENCE, request=pilot.mav.mission_request_send)
+    assert as_float[0].x == pytest.approx(fence[0].x * 1e-7, abs=1e-5)  # degrees, as a float32
+    start = len(pilot.received)
+    triangle_of_two = [fence_item(pilot, seq, INCLUSION_VERTEX, n, e, 2) for seq, (n, e) in enumerate(((0, 9), (9, 0)))]
+    assert upload(pilot, triangle_of_two, mission_type=FENCE)[0] == mavlink.MAV_MISSION_ERROR  # after the last item
+    assert texts(pilot, start) == ["Invalid vertex count (2)", "Fence validation failed"]
+    start = len(pilot.received)
+    assert upload(pilot, square_fence(pilot)[:3], mission_type=FENCE)[0] == mavlink.MAV_MISSION_ERROR
+    assert texts(pilot, start) == ["Incorrect item count", "Fence validation failed"]  # 3 of 4 vertices
+    waypoint = item(pilot, 0, WAYPOINT, 10, 0, 10)
+    waypoint.mission_type = FENCE
+    assert upload(pilot, [waypoint], mission_type=FENCE)[0] == mavlink.MAV_MISSION_UNSUPPORTED
+    assert len(stored.items) == 5  # refused uploads leave the fence as it was
+    start = len(pilot.received)
+    too_many = [fence_item(pilot, seq, INCLUSION_VERTEX, 0, seq, 71) for seq in range(71)]
+    assert upload(pilot, too_many, mission_type=FENCE)[0] == mavlink.MAV_MISSION_NO_SPACE
+    assert "Only 70 items are supported" in texts(pilot, start)  # the fence storage's bytes / 8 in SITL
+    pilot.mav.mission_clear_all_send(1, 1, FENCE)
+    assert pilot.wait_message("MISSION_ACK", match=lambda m: m.mission_type == FENCE).type == \
+        mavlink.MAV_MISSION_ACCEPTED
+    assert stored.items == [] and pilot.vehicle.autopilot.polyfence_areas == ()
+
+
+def test_rally_points_are_written_one_by_one_downloaded_in_whole_metres_and_refused_as_arducopter_does():
+    pilot = copter()
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 3.0, "GPS")
+    stored = pilot.vehicle.copter_transfers.rally
+    points = [rally_point(pilot, 0, 100.0, 0.0, 12.7), rally_point(pilot, 1, 0.0, 80.0, 30.0, mavlink.MAV_FRAME_GLOBAL),
+              rally_point(pilot, 2, -90.0, 0.0, 20.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)]
+    start = len(pilot.received)
+    assert upload(pilot, points, mission_type=RALLY)[0] == mavlink.MAV_MISSION_ACCEPTED
+    assert texts(pilot, start) == []  # no "Flight plan received" for rally points
+    got = download(pilot, RALLY)
+    assert [(m.frame, m.z, m.x, m.y, m.param1, m.param4) for m in got] == [
+        (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 12.0, points[0].x, points[0].y, 0.0, 0.0),  # whole metres, int16
+        (mavlink.MAV_FRAME_GLOBAL, 30.0, points[1].x, points[1].y, 0.0, 0.0),
+        (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 20.0, points[2].x, points[2].y, 0.0, 0.0)]
+    waypoint = item(pilot, 1, WAYPOINT, 10, 0, 10)
+    waypoint.mission_type = RALLY
+    assert upload(pilot, [rally_point(pilot, 0, 50.0, 50.0), waypoint], mission_type=RALLY)[0] == \
+        mavlink.MAV_MISSION_UNSUPPORTED
+    assert [round(p.z) for p in stored.items] == [10, 30]  # MISSION_COUNT truncated to 2, point 0 replaced
+    high = rally_point(pilot, 0, 50.0, 50.0, 40000.0)
+    assert upload(pilot, [high], mission_type=RALLY)[0] == mavlink.MAV_MISSION_INVALID_PARAM7  # an int16 of metres
+    terrain = rally_point(pilot, 0, 50.0, 50.0, frame=mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT)
+    assert upload(pilot, [terrain], mission_type=RALLY)[0] == mavlink.MAV_MISSION_UNSUPPORTED_FRAME  # no terrain
+    assert upload(pilot, [rally_point(pilot, seq, 50.0, seq) for seq in range(47)], mission_type=RALLY)[0] == \
+        mavlink.MAV_MISSION_NO_SPACE  # 46 in SITL's rally storage
+    pilot.mav.mission_count_send(1, 1, 1, 7)
+    assert pilot.wait_message("MISSION_ACK").type == mavlink.MAV_MISSION_UNSUPPORTED  # no protocol for type 7
+    pilot.mav.mission_clear_all_send(1, 1, RALLY)
+    assert pilot.wait_message("MISSION_ACK", match=lambda m: m.mission_type == RALLY).type == \
+        mavlink.MAV_MISSION_ACCEPTED
+    assert stored.items == [] and pilot.vehicle.autopilot.rally_points == ()
+
+
+@pytest.mark.parametrize("params, out_m, lands_at", [
+    ({}, 150.0, (100.0, 0.0)),  # RALLY_INCL_HOME 1: the rally point, 50 m away, is closer than home (150 m)
+    ({}, 40.0, (0.0, 0.0)),  # home, 40 m away, is closer than the rally point (60 m)
+    ({"RALLY_INCL_HOME": 0}, 40.0, (100.0, 0.0)),  # home is not a choice: the closest rally point
+    ({"RALLY_LIMIT_KM": 0.04}, 150.0, (0.0, 0.0)),  # the closest rally point is beyond 40 m: home
+])
+def test_rtl_returns_to_the_closest_rally_point_as_ap_rally_chooses_it(params, out_m, lands_at):
+    pilot = airborne(params, alt_m=10.0)
+    v = pilot.vehicle
+    points = [rally_point(pilot, 0, 100.0, 0.0, 20.0), rally_point(pilot, 1, 0.0, 300.0, 10.0)]
+    assert upload(pilot, points, mission_type=RALLY)[0] == mavlink.MAV_MISSION_ACCEPTED
+    pilot.stream = (10.0, 0.0, 0.0, mavlink.MAV_FRAME_LOCAL_NED)
+    pilot.wait_for(lambda: v.state.north_m > out_m, 30, "out north")
+    pilot.stream = None
+    assert pilot.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == ACCEPTED
+    if lands_at != (0.0, 0.0):  # at least the rally point's altitude (20 m), above RTL_ALT's 15
+        assert -v.autopilot.rtl_return_down_m == pytest.approx(20.0, abs=0.3)
+    pilot.wait_for(lambda: not v.autopilot.armed, 120, "landed and disarmed")
+    assert math.hypot(v.state.north_m - lands_at[0], v.state.east_m - lands_at[1]) < 1.5

@@ -1,5 +1,6 @@
-"""The autopilots' own geofences (sitl_bridge/px4/geofence.py and sitl_bridge/ardupilot/fence.py), flown in lockstep with pymavlink: PX4's GF_* cylinder and
-ArduCopter's FENCE_* circle, ceiling and floor, their actions, texts and pre-arm refusals."""
+"""The autopilots' own geofences (sitl_bridge/px4/geofence.py and sitl_bridge/ardupilot/fence.py), flown in lockstep
+with pymavlink: PX4's GF_* cylinder and ArduCopter's FENCE_* circle, ceiling and floor and its uploaded polygons and
+circles (FENCE_TYPE bit 4), their actions, texts and pre-arm refusals."""
 from __future__ import annotations
 
 import math
@@ -10,8 +11,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_ardupilot_vehicle import airborne
 
 from autonomy.vehicle_link import VehicleLink
-from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.ardupilot.fence import fence_names
+from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
@@ -230,6 +231,62 @@ def test_copter_fence_prearm_checks():
     assert "PreArm: FENCE_MARGIN too big" in texts(pilot)
     pilot.set_param("FENCE_ALT_MIN", -10.0)
     assert pilot.command(ARM, 1) == ACCEPTED
+
+
+def copter_with_uploaded_fence(params: dict, fence: list | None = None) -> LockstepPilot:
+    """An ArduCopter on the ground with its GPS fix and ``fence(pilot)`` uploaded (by default a 40 m inclusion
+    square)."""
+    from test_px4_mission import square_fence, upload  # here: test_px4_mission imports this module
+
+    pilot = LockstepPilot.create(VehicleConfig(autopilot="ardupilot", seed=5, params=params))
+    pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 2.0, "GPS")
+    fence = square_fence(pilot, half_m=40.0) if fence is None else fence(pilot)
+    assert upload(pilot, fence, mission_type=mavlink.MAV_MISSION_TYPE_FENCE)[0] == mavlink.MAV_MISSION_ACCEPTED
+    return pilot
+
+
+def take_off(pilot: LockstepPilot) -> None:
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == ACCEPTED
+    assert pilot.command(TAKEOFF, 0, 0, 0, 0, 0, 0, 10.0) == ACCEPTED
+    pilot.wait_for(lambda: not pilot.vehicle.autopilot.taking_off and not pilot.vehicle.state.on_ground, 30,
+                   "takeoff")
+
+
+def test_copter_polygon_fence_breach_returns_home():
+    pilot = copter_with_uploaded_fence({"FENCE_ENABLE": 1})  # FENCE_TYPE 7 has the polygon bit
+    take_off(pilot)
+    pilot.stream = (0.0, 5.0, 0.0, LOCAL_NED)
+    pilot.wait_for(lambda: pilot.heartbeat_mode() is CopterMode.RTL, 30.0, "fence RTL")
+    assert 40.0 <= pilot.vehicle.state.east_m < 40.0 + 5.0 * 0.04 + 0.2  # caught at the square's edge (25 Hz)
+    assert "Polygon fence breached" in texts(pilot)
+    pilot.stream = None
+    pilot.wait_for(lambda: not pilot.vehicle.autopilot.armed, 120.0, "RTL lands and disarms")
+    assert distance_from_home(pilot) < 1.5 and "Fence breach cleared" in texts(pilot)
+
+
+def test_copter_uploaded_fence_needs_the_polygon_bit():
+    pilot = copter_with_uploaded_fence({"FENCE_ENABLE": 1, "FENCE_TYPE": 3})  # max altitude and circle only
+    take_off(pilot)
+    pilot.stream = (0.0, 5.0, 0.0, LOCAL_NED)
+    pilot.wait_for(lambda: pilot.vehicle.state.east_m > 60.0, 30.0, "past the square")
+    assert pilot.vehicle.autopilot.mode is CopterMode.GUIDED and "Polygon fence breached" not in texts(pilot)
+
+
+def test_copter_uploaded_fence_prearm_checks():
+    from test_px4_mission import fence_item
+
+    def circle(command: int, north: float, radius_m: float):
+        return lambda pilot: [fence_item(pilot, 0, command, north, 0.0, radius_m)]
+
+    pilot = copter_with_uploaded_fence({"FENCE_ENABLE": 1}, circle(mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 5, 20))
+    fly(pilot, 0.1)  # the fence is checked at 25 Hz, armed or not
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == FAILED
+    assert "PreArm: Vehicle breaching Polygon fence" in texts(pilot)  # home is in the exclusion circle
+    pilot = copter_with_uploaded_fence({"FENCE_ENABLE": 1}, circle(mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 0, 1.5))
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == FAILED
+    assert "PreArm: Polygon fence margin is greater than inclusion circle radius" in texts(pilot)  # FENCE_MARGIN 2
+    pilot = copter_with_uploaded_fence({"FENCE_ENABLE": 1, "FENCE_TYPE": 4})  # polygons only: present with a fence
+    assert pilot.set_mode(CopterMode.GUIDED) == ACCEPTED and pilot.command(ARM, 1) == ACCEPTED
 
 
 # ---------------------------------------------------------------- long texts

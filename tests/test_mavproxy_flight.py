@@ -228,6 +228,41 @@ def test_mavproxy_loads_an_ardupilot_mission_and_mission_start_flies_it(udp_port
         assert server.error is None and vehicle.handler_errors == 0
 
 
+def test_mavproxy_loads_an_ardupilot_fence_and_rally_points(udp_ports, tmp_path):
+    """MAVProxy's fence and rally modules (MISSION_ITEM protocol, types FENCE and RALLY): ``fence load`` and
+    ``rally load`` of QGC WPL 110 files, then ``fence list`` / ``rally list`` download them again."""
+    tcp_port, api_port, api_remote, _ = udp_ports
+    ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)
+    with VehicleServer(VehicleConfig(autopilot="ardupilot", seed=3), ports, speed=SPEED) as server:
+        vehicle = server.vehicle
+        corners = [vehicle.frame.to_geodetic(n, e, 0.0) for n, e in ((-50, -50), (50, -50), (50, 50), (-50, 50))]
+        fence = [f"{seq}\t0\t0\t5001\t4\t0\t0\t0\t{lat:.8f}\t{lon:.8f}\t0\t0"
+                 for seq, (lat, lon, _) in enumerate(corners)]
+        (tmp_path / "fence.txt").write_text("QGC WPL 110\n" + "\n".join(fence) + "\n")
+        lat, lon, _ = vehicle.frame.to_geodetic(40.0, 0.0, 0.0)
+        (tmp_path / "rally.txt").write_text(f"QGC WPL 110\n0\t0\t3\t5100\t0\t0\t0\t0\t{lat:.8f}\t{lon:.8f}\t15\t0\n")
+        mavproxy = MavProxy(f"tcp:127.0.0.1:{tcp_port}", tmp_path)
+        try:
+            mavproxy.expect("Detected vehicle 1:1")
+            mavproxy.send(f"fence load {tmp_path / 'fence.txt'}")
+            mavproxy.expect("Got MISSION_ACK: TYPE_FENCE: ACCEPTED")
+            mavproxy.send(f"rally load {tmp_path / 'rally.txt'}")
+            mavproxy.expect("Got MISSION_ACK: TYPE_RALLY: ACCEPTED")
+            mavproxy.send("fence list")
+            mavproxy.expect("Requesting 4 fence items")
+            listed = [mavproxy.expect("5001 0 ") for _ in corners]  # command, frame GLOBAL, lat, lon, ...
+            mavproxy.send("rally list")
+            mavproxy.expect("Requesting 1 rally items")
+            assert mavproxy.expect("5100 3 ").split()[4] == "15.000000"  # GLOBAL_RELATIVE_ALT, 15 m above home
+        finally:
+            mavproxy.close()
+        assert server.error is None and vehicle.handler_errors == 0
+    assert [float(v) for line in listed for v in line.split()[2:4]] == pytest.approx(
+        [v for lat, lon, _ in corners for v in (lat, lon)], abs=2e-7)  # MAVProxy sends int(degrees * 1e7)
+    assert [(a.inclusion, len(a.vertices)) for a in vehicle.autopilot.polyfence_areas] == [(True, 4)]
+    assert vehicle.autopilot.rally_points[0].z == 15.0 and vehicle.autopilot.rally_points[0].relative
+
+
 def test_mavproxy_flies_the_ardupilot_personality_on_tcp_like_sitl(udp_ports, tmp_path):
     tcp_port, api_port, api_remote, _ = udp_ports
     ports = UdpPorts(api_port=api_port, api_remote_port=api_remote, gcs_remote_port=None, tcp_port=tcp_port)

@@ -8,28 +8,44 @@ with MISSION_COUNT / MISSION_REQUEST_INT / MISSION_ITEM_INT / MISSION_ACK, and f
 MISSION_CURRENT and MISSION_ITEM_REACHED. MAVSDK refuses the transfer outright against a vehicle whose
 AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_MISSION_INT, as the simulator's did before missions were emulated.
 MAVSDK-Python's ``examples/geofence.py`` uploads a fence the same way (mission type FENCE), and the vehicle then
-keeps to it. Against ArduPilot MAVSDK's Mission plugin refuses to upload (INVALID_ARGUMENT, before sending anything:
+keeps to it; MissionRaw imports a QGroundControl plan's rally points and uploads them (type RALLY), and RTL lands
+at the closest. Against ArduPilot MAVSDK's Mission plugin refuses to upload (INVALID_ARGUMENT, before sending anything:
 MAVSDK-Python issue #819, MAVSDK #2029); MissionRaw is MAVSDK's way there, with home as item 0.
 """
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 
 import pytest
+from pymavlink.dialects.v20 import common as mavlink
 
-from test_mavsdk_flight import COMPANION_STREAMS, SPEED, T, autopilot_at, bounded, first, vehicle_server
+pytest.importorskip("mavsdk.asyncio")  # the tests below need MAVSDK 4.x
 
-from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402  (skipped with test_mavsdk_flight's importorskip)
+from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import FenceType, GeofenceAsync, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
-from mavsdk.asyncio.plugins.mission_raw import MissionItem as RawItem, MissionRawAsync  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+from test_mavsdk_flight import COMPANION_STREAMS, SPEED, T, autopilot_at, bounded, first, vehicle_server  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
 WAYPOINTS_NE = ((40.0, 0.0), (40.0, 50.0), (0.0, 50.0))
 """The example's three waypoints are about 40-60 m apart near Zurich; these are as far apart around our home."""
 ALTITUDE_M, SPEED_MPS = 25.0, 10.0
+
+
+def flown_against(udp_ports: list[int], flight, seed: int, autopilot: str = "px4", params: dict | None = None,
+                  timeout_s: float = 200.0):
+    """``flight(port, server)`` (a coroutine) against a vehicle served over UDP: its result and the vehicle, which
+    must have raised nothing."""
+    server, mavsdk_port = vehicle_server(udp_ports, seed, autopilot, params)
+    with server:
+        result = asyncio.run(asyncio.wait_for(flight(mavsdk_port, server), timeout_s))
+        assert server.error is None and server.vehicle.handler_errors == 0
+    return result, server.vehicle
 
 
 def example_item(lat: float, lon: float) -> MissionItem:
@@ -87,11 +103,7 @@ async def fly_mission_example(port: int, server) -> dict:
 
 
 def test_mavsdk_mission_example_uploads_flies_the_waypoints_and_returns(udp_ports):
-    server, mavsdk_port = vehicle_server(udp_ports, seed=21, params={"RTL_RETURN_ALT": 30.0})
-    with server:
-        flown = asyncio.run(asyncio.wait_for(fly_mission_example(mavsdk_port, server), 200))
-        assert server.error is None and server.vehicle.handler_errors == 0
-        vehicle = server.vehicle
+    flown, vehicle = flown_against(udp_ports, fly_mission_example, 21, params={"RTL_RETURN_ALT": 30.0})
 
     stored = flown["stored"]  # what MAVSDK sent, as the vehicle parsed it
     commands = [item.command for item in stored]
@@ -153,15 +165,59 @@ async def fly_geofence_example(port: int, server) -> list[str]:
 
 
 def test_mavsdk_geofence_example_uploads_a_fence_the_vehicle_keeps_to(udp_ports):
-    server, mavsdk_port = vehicle_server(udp_ports, seed=22)
-    with server:
-        heard = asyncio.run(asyncio.wait_for(fly_geofence_example(mavsdk_port, server), 120))
-        assert server.error is None and server.vehicle.handler_errors == 0
-        vehicle = server.vehicle
+    heard, vehicle = flown_against(udp_ports, fly_geofence_example, 22, timeout_s=120.0)
     assert [(item.command, item.params[0]) for item in vehicle.missions.fence] == [(5001, 4.0)] * 4
     assert [(area.inclusion, len(area.vertices)) for area in vehicle.autopilot.fence_areas] == [(True, 4)]
     assert "Geofence: approaching or outside geofence" in heard
-    assert vehicle.autopilot.mode.name == "HOLD" and 7.0 <= vehicle.state.east_m < 11.0  # held at the fence, not at 40 m
+    assert vehicle.autopilot.mode.name == "HOLD" and 7.0 <= vehicle.state.east_m < 11.0  # held at the fence, not 40 m
+
+
+def qgc_plan(home, rally_points: list[tuple[float, float, float]]) -> str:
+    """A QGroundControl .plan (JSON) with no mission items, no fence and these rally points (lat, lon, altitude
+    above home), in the format QGroundControl's Plan view saves."""
+    return json.dumps({
+        "fileType": "Plan", "groundStation": "QGroundControl", "version": 1,
+        "mission": {"version": 2, "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5,
+                    "plannedHomePosition": [home.lat_deg, home.lon_deg, home.alt_m], "items": []},
+        "geoFence": {"version": 2, "circles": [], "polygons": []},
+        "rallyPoints": {"version": 2, "points": [list(point) for point in rally_points]}})
+
+
+async def fly_rtl_to_a_rally_point(port: int, server) -> dict:
+    """A QGroundControl plan's rally points imported and uploaded with MissionRaw, downloaded again; then take off,
+    go 60 m north and return (PX4's RTL_TYPE 0: the closest of home and the rally points)."""
+    vehicle, flown = server.vehicle, {}
+    async with autopilot_at(port) as system:
+        raw, telemetry, action = MissionRawAsync(system), TelemetryAsync(system), ActionAsync(system)
+        points = [(*vehicle.frame.to_geodetic(north, east, 0.0)[:2], 0.0) for north, east in ((60.0, 40.0), (-60.0, 0))]
+        imported = await bounded(raw.import_qgroundcontrol_mission_from_string(qgc_plan(vehicle.home, points)))
+        flown["imported"] = [(item.command, item.frame, item.mission_type) for item in imported.rally_items]
+        await bounded(raw.upload_rally_points(imported.rally_items))
+        flown["downloaded"] = [(i.command, i.x, i.y, i.z) for i in await bounded(raw.download_rallypoints())]
+        home = await first(telemetry.subscribe_home(), lambda h: True, 20, "home")
+        await first(telemetry.subscribe_health(), lambda h: h.is_global_position_ok and h.is_armable, 20, "armable")
+        await bounded(action.arm())
+        await bounded(action.takeoff())
+        await first(telemetry.subscribe_position(), lambda p: p.relative_altitude_m > 2.0, 20, "in the air")
+        lat, lon, _ = vehicle.frame.to_geodetic(60.0, 0.0, 0.0)
+        await bounded(action.goto_location(lat, lon, home.absolute_altitude_m + 10.0, 0.0))
+        await first(telemetry.subscribe_position(),
+                    lambda p: abs(p.latitude_deg - lat) < 2e-5 and abs(p.longitude_deg - lon) < 3e-5, 60, "60 m north")
+        await bounded(action.return_to_launch())
+        await first(telemetry.subscribe_armed(), lambda armed: not armed, 120 / SPEED + 30, "landed and disarmed")
+    flown["points"] = points
+    return flown
+
+
+def test_mavsdk_uploads_a_qgroundcontrol_plans_rally_points_and_rtl_lands_at_the_closest(udp_ports):
+    flown, vehicle = flown_against(udp_ports, fly_rtl_to_a_rally_point, 24, params={"RTL_RETURN_ALT": 10.0})
+    rally_point = (mavlink.MAV_CMD_NAV_RALLY_POINT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                   mavlink.MAV_MISSION_TYPE_RALLY)
+    assert flown["imported"] == [rally_point] * 2  # as QGroundControl sends them
+    assert [(c, x, y) for c, x, y, _ in flown["downloaded"]] == [
+        (mavlink.MAV_CMD_NAV_RALLY_POINT, round(lat * 1e7), round(lon * 1e7)) for lat, lon, _ in flown["points"]]
+    assert len(vehicle.autopilot.rally_points) == 2
+    assert math.hypot(vehicle.state.north_m - 60.0, vehicle.state.east_m - 40.0) < 2.0  # 40 m away; home 60 m
 
 
 async def fly_raw_mission_on_ardupilot(port: int, server) -> dict:
@@ -204,11 +260,8 @@ async def fly_raw_mission_on_ardupilot(port: int, server) -> dict:
 
 
 def test_mavsdk_mission_raw_flies_an_ardupilot_mission_in_auto(udp_ports):
-    server, mavsdk_port = vehicle_server(udp_ports, 23, "ardupilot", {**COMPANION_STREAMS, "AUTO_OPTIONS": 2})
-    with server:
-        flown = asyncio.run(asyncio.wait_for(fly_raw_mission_on_ardupilot(mavsdk_port, server), 200))
-        assert server.error is None and server.vehicle.handler_errors == 0
-        vehicle = server.vehicle
+    flown, vehicle = flown_against(udp_ports, fly_raw_mission_on_ardupilot, 23, "ardupilot",
+                                   {**COMPANION_STREAMS, "AUTO_OPTIONS": 2})
     assert flown["stored"] == [22, 16, 16, 20] and flown["mode"] == "AUTO"  # home (item 0) is not stored
     assert flown["finished"] is True and (5, 5) in flown["progress"]
     home_alt = round(vehicle.home.alt_m, 2)

@@ -1,10 +1,13 @@
-"""PX4's mission protocol, Mission mode and uploaded fences, over the in-memory link with a pymavlink client in lockstep.
+"""PX4's mission protocol, Mission mode, uploaded fences and rally points, over the in-memory link with a pymavlink
+client in lockstep.
 
 What PX4 does is in sitl_bridge/px4/mission_protocol.py and sitl_bridge/px4/mission.py (docs/sitl.md, "PX4 missions",
 has the source lines): the upload handshake and its retries, the download, clear and set-current, the feasibility
 check (a mission outside the geofence is stored but cannot be started), the climb PX4 inserts before the first
 waypoint, hold times, the landing item, pausing and resuming, and the restart after a finished mission; a fence
-uploaded as the FENCE type (sitl_bridge/px4/geofence.py): its areas, the breach, and missions checked against it.
+uploaded as the FENCE type (sitl_bridge/px4/geofence.py): its areas, the breach, and missions checked against it;
+rally points uploaded as the RALLY type (sitl_bridge/px4/rally.py): stored, downloaded, cleared, and the closest one
+is where RTL goes.
 """
 from __future__ import annotations
 
@@ -12,9 +15,7 @@ import math
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
-
 from test_autopilot_fences import texts
-from test_vehicle_commands import pilot  # noqa: F401  (the fixture: a lockstep vehicle with a GPS fix)
 
 from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
@@ -90,8 +91,8 @@ def test_an_unsupported_item_aborts_the_upload_and_keeps_the_stored_mission(pilo
     speed_in_global_frame = item(pilot, 0, 5, 5, 10, command=mavlink.MAV_CMD_DO_CHANGE_SPEED)
     assert upload(pilot, [speed_in_global_frame])[0] == mavlink.MAV_MISSION_UNSUPPORTED
     assert len(pilot.vehicle.missions.items) == 3  # the square is still the mission
-    assert upload(pilot, [item(pilot, 0, 5, 5, 10)], mission_type=mavlink.MAV_MISSION_TYPE_RALLY)[0] == \
-        mavlink.MAV_MISSION_UNSUPPORTED  # rally points are not emulated
+    rally_point_in_a_mission = item(pilot, 0, 5, 5, 10, command=mavlink.MAV_CMD_NAV_RALLY_POINT)
+    assert upload(pilot, [rally_point_in_a_mission])[0] == mavlink.MAV_MISSION_ERROR  # a mission holds no rally points
     waypoint_in_a_fence = item(pilot, 0, 5, 5, 10)
     waypoint_in_a_fence.mission_type = mavlink.MAV_MISSION_TYPE_FENCE
     assert upload(pilot, [waypoint_in_a_fence], mission_type=mavlink.MAV_MISSION_TYPE_FENCE)[0] == \
@@ -330,3 +331,85 @@ def test_flying_out_of_an_uploaded_fence_holds_and_a_mission_crossing_it_is_refu
     pilot.wait_for(lambda: v.autopilot.mode is FlightMode.HOLD, 30.0, "the fence's Hold")
     assert "Geofence: approaching or outside geofence" in texts(pilot, start)
     assert 20.0 <= v.state.east_m < 23.0  # caught at the fence (checked every 200 ms at 4 m/s)
+
+
+# ------------------------------------------------------------------ rally points
+RALLY = mavlink.MAV_MISSION_TYPE_RALLY
+
+
+def rally_point(pilot: LockstepPilot, seq: int, north: float, east: float, alt: float = 10.0,
+                frame: int = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT) -> mavlink.MAVLink_message:
+    """A rally point as QGroundControl sends one (MISSION_ITEM_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT, no parameters)."""
+    lat, lon, _ = pilot.vehicle.frame.to_geodetic(north, east, 0.0)
+    return mavlink.MAVLink_mission_item_int_message(1, 1, seq, frame, mavlink.MAV_CMD_NAV_RALLY_POINT, 0, 0, 1, 2, 3,
+                                                    4, round(lat * 1e7), round(lon * 1e7), alt, RALLY)
+
+
+def test_rally_points_are_stored_downloaded_and_cleared_apart_from_the_mission(pilot):
+    ap, stored = pilot.vehicle.autopilot, pilot.vehicle.missions
+    assert upload(pilot, square(pilot))[0] == ACCEPTED
+    points = [rally_point(pilot, 0, 80.0, 0.0), rally_point(pilot, 1, 0.0, -60.0, 20.0, mavlink.MAV_FRAME_GLOBAL)]
+    result, requests = upload(pilot, points, mission_type=RALLY)
+    assert result == ACCEPTED and [(r.seq, r.mission_type) for r in requests] == [(0, RALLY), (1, RALLY)]
+    assert len(ap.rally_points) == 2 and len(stored.items) == 3  # the mission is another list
+    pilot.mav.mission_request_list_send(1, 1, RALLY)
+    assert pilot.wait_message("MISSION_COUNT", match=lambda m: m.mission_type == RALLY).count == 2
+    got = []
+    for seq in range(2):
+        pilot.mav.mission_request_int_send(1, 1, seq, RALLY)
+        got.append(pilot.wait_message("MISSION_ITEM_INT", match=lambda m, s=seq: m.seq == s))
+    pilot.mav.mission_ack_send(1, 1, ACCEPTED, RALLY)
+    assert [(m.command, m.frame, m.x, m.y, m.z, m.mission_type) for m in got] == [
+        (mavlink.MAV_CMD_NAV_RALLY_POINT, frame, sent.x, sent.y, sent.z, RALLY)
+        for sent, frame in zip(points, (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_FRAME_GLOBAL_INT))]
+    assert {(m.param1, m.param2, m.param3, m.param4) for m in got} == {(0.0, 0.0, 0.0, 0.0)}  # as PX4 formats them
+    pilot.mav.mission_clear_all_send(1, 1, RALLY)
+    assert pilot.wait_message("MISSION_ACK", match=lambda m: m.mission_type == RALLY).type == ACCEPTED
+    assert ap.rally_points == () and stored.rally == [] and len(stored.items) == 3
+
+
+def test_a_rally_upload_holds_32_points_and_keeps_what_px4_parses(pilot):
+    too_many = [rally_point(pilot, seq, 50.0, float(seq)) for seq in range(33)]
+    assert upload(pilot, too_many, mission_type=RALLY)[0] == mavlink.MAV_MISSION_NO_SPACE  # DM_KEY_SAFE_POINTS_MAX
+    waypoint = item(pilot, 1, 40.0, 40.0, 10.0)
+    waypoint.mission_type = RALLY
+    assert upload(pilot, [rally_point(pilot, 0, 50.0, 0.0), waypoint], mission_type=RALLY)[0] == ACCEPTED
+    assert len(pilot.vehicle.missions.rally) == 2 and len(pilot.vehicle.autopilot.rally_points) == 1  # RTL: rally only
+    local = rally_point(pilot, 0, 50.0, 0.0, frame=mavlink.MAV_FRAME_LOCAL_NED)
+    assert upload(pilot, [local], mission_type=RALLY)[0] == mavlink.MAV_MISSION_UNSUPPORTED_FRAME
+    assert len(pilot.vehicle.missions.rally) == 2  # a refused upload keeps what was stored
+
+
+def return_from(pilot: LockstepPilot, north: float, east: float, alt: float = 15.0) -> None:
+    """Take off, fly to (north, east) at ``alt`` with DO_REPOSITION, then RTL until landed and disarmed."""
+    v = pilot.vehicle
+    pilot.set_param("MIS_TAKEOFF_ALT", alt)
+    assert pilot.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
+    assert pilot.command(TAKEOFF, *[math.nan] * 7) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: v.autopilot.mode is FlightMode.HOLD and not v.state.on_ground, 30.0, "takeoff")
+    lat, lon, _ = v.frame.to_geodetic(north, east, 0.0)
+    assert pilot.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, lat, lon,
+                         v.home.alt_m + alt) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: math.hypot(v.state.north_m - north, v.state.east_m - east) < 1.0, 60.0, "out there")
+    assert pilot.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == mavlink.MAV_RESULT_ACCEPTED
+    pilot.wait_for(lambda: not v.autopilot.armed, 120.0, "landed and disarmed")
+
+
+def test_rtl_lands_at_the_closest_rally_point_when_it_is_closer_than_home(pilot):
+    """rtl.cpp with RTL_TYPE 0: the nearest of home and the rally points, a rally point within 10 m of home not
+    counting, one whose frame is MAV_FRAME_GLOBAL_RELATIVE_ALT_INT read as GLOBAL_RELATIVE_ALT."""
+    v = pilot.vehicle
+    points = [rally_point(pilot, 0, 5.0, 5.0), rally_point(pilot, 1, 70.0, 10.0),
+              rally_point(pilot, 2, 60.0, 80.0, frame=mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)]
+    assert upload(pilot, points, mission_type=RALLY)[0] == ACCEPTED
+    return_from(pilot, 60.0, 50.0)
+    assert math.hypot(v.state.north_m - 60.0, v.state.east_m - 80.0) < 1.5  # 30 m away, not the other at 41 m
+    assert v.state.on_ground and v.autopilot.rtl_destination is not None
+
+
+def test_rtl_goes_home_when_home_is_closer_than_every_rally_point(pilot):
+    v = pilot.vehicle
+    assert upload(pilot, [rally_point(pilot, 0, 8.0, 0.0), rally_point(pilot, 1, -60.0, 0.0)],
+                  mission_type=RALLY)[0] == ACCEPTED
+    return_from(pilot, 25.0, 0.0)  # home 25 m away; the point 8 m from home is too close to home to count
+    assert math.hypot(v.state.north_m, v.state.east_m) < 1.5 and v.autopilot.rtl_destination is None

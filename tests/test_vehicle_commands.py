@@ -9,12 +9,10 @@ import math
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
-
 from test_autopilot_fences import texts
 
 from sitl_bridge.px4.modes import FlightMode
 from sitl_bridge.scripted_flight import LockstepPilot
-from sitl_bridge.vehicle import VehicleConfig
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
@@ -22,13 +20,6 @@ DENIED = mavlink.MAV_RESULT_DENIED
 UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
 REPOSITION = mavlink.MAV_CMD_DO_REPOSITION
-
-
-@pytest.fixture
-def pilot() -> LockstepPilot:
-    p = LockstepPilot.create(VehicleConfig(seed=1))
-    p.wait_for(lambda: p.vehicle.autopilot.gps_ok, 2.0, "GPS")
-    return p
 
 
 def airborne(pilot: LockstepPilot, alt_m: float = 10.0) -> LockstepPilot:
@@ -165,7 +156,8 @@ def test_mode_change_is_announced_by_an_immediate_heartbeat(pilot):
     pilot.vehicle.run(1.5)  # past a scheduled heartbeat
     pilot.mav.command_long_send(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, 3, 0, 0, 0, 0, 0)
     sent_at = pilot.vehicle.time_s
-    beat = pilot.wait_message("HEARTBEAT", 0.2, lambda m: FlightMode.from_custom_mode(m.custom_mode) is FlightMode.POSCTL)
+    beat = pilot.wait_message("HEARTBEAT", 0.2,
+                              lambda m: FlightMode.from_custom_mode(m.custom_mode) is FlightMode.POSCTL)
     assert beat is not None and pilot.vehicle.time_s - sent_at <= 0.02
 
 

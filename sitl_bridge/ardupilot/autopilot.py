@@ -14,9 +14,10 @@ ArduPilot's source, read through the search tools (docs/sitl.md, "ArduPilot Copt
   velocity the target becomes zero and the vehicle stays in GUIDED; invalid targets stop it. MAV_CMD_DO_REPOSITION
   (COMMAND_INT only; MAVSDK's goto_location) sets a GUIDED position target, switching to GUIDED with its flag.
 * RTL climbs (RTL_ALT, cone slope), returns, hovers RTL_LOIT_TIME, lands; LAND and RTL disarm once landed, other
-  modes DISARM_DELAY after landing. AUTO flies the uploaded mission (:mod:`sitl_bridge.ardupilot.auto`; the
-  protocol: :mod:`sitl_bridge.ardupilot.mission_protocol`). Failsafes: :mod:`sitl_bridge.ardupilot.failsafes`; the modes' velocity
-  commands: :mod:`sitl_bridge.ardupilot.guidance`.
+  modes DISARM_DELAY after landing; RTL goes to the closest rally point when AP_Rally says so
+  (:mod:`sitl_bridge.ardupilot.rally`). AUTO flies the uploaded mission (:mod:`sitl_bridge.ardupilot.auto`; the
+  protocol: :mod:`sitl_bridge.ardupilot.mission_protocol`). Failsafes: :mod:`sitl_bridge.ardupilot.failsafes`;
+  fences: :mod:`sitl_bridge.ardupilot.fence`; the modes' velocity commands: :mod:`sitl_bridge.ardupilot.guidance`.
 
 ``autopilot.mode`` is a :class:`CopterMode`; ``autopilot.status`` is the personality-neutral view
 (:class:`sitl_bridge.autopilot_base.FlightStatus`).
@@ -30,14 +31,24 @@ from pymavlink.dialects.v20 import common as mavlink
 from missions.geodesy import LocalFrame
 from sitl_bridge.ardupilot.auto import CopterAuto
 from sitl_bridge.ardupilot.failsafes import CopterFailsafes
+from sitl_bridge.ardupilot.fence import CopterFence
 from sitl_bridge.ardupilot.guidance import CopterGuidance
 from sitl_bridge.ardupilot.modes import OTHER_COPTER_MODES, CopterMode, base_mode
+from sitl_bridge.ardupilot.rally import CopterRally
 from sitl_bridge.ardupilot.targets import GuidedTargets
 from sitl_bridge.autopilot_base import (
-    ABOVE_HOME_FRAMES, ACCEPTED, DENIED, FAILED, UNSUPPORTED, AutopilotBase, FlightStatus, Setpoint, as_int,
-    battery_voltage_v)
+    ABOVE_HOME_FRAMES,
+    ACCEPTED,
+    DENIED,
+    FAILED,
+    UNSUPPORTED,
+    AutopilotBase,
+    FlightStatus,
+    Setpoint,
+    as_int,
+    battery_voltage_v,
+)
 from sitl_bridge.dynamics import velocity_toward
-from sitl_bridge.ardupilot.fence import CopterFence
 from sitl_bridge.multirotor import HOVER, MultirotorParams, VehicleState, VelocityCommand
 from sitl_bridge.params import ParameterStore
 
@@ -61,7 +72,7 @@ PHASE_OF_MODE = {CopterMode.GUIDED: "guided", CopterMode.LOITER: "holding", Copt
                  CopterMode.AUTO: "mission"}
 
 
-class ArduCopter(CopterAuto, CopterFailsafes, CopterFence, CopterGuidance, GuidedTargets, AutopilotBase):
+class ArduCopter(CopterAuto, CopterFailsafes, CopterFence, CopterRally, CopterGuidance, GuidedTargets, AutopilotBase):
     """Modes, arming and command handling of one simulated ArduCopter."""
 
     PARAMS_BYTEWISE = False
@@ -79,6 +90,7 @@ class ArduCopter(CopterAuto, CopterFailsafes, CopterFence, CopterGuidance, Guide
         self.taking_off = False
         self.rtl_state = "climb"
         self.rtl_return_down_m = 0.0
+        self.rtl_target: tuple[float, float] = (0.0, 0.0)  # where RTL returns to: home or a rally point (north, east)
         self._rtl_loiter_since_s: float | None = None
         self.land_pause_until_s = -math.inf
         self.guided_timed_out = False
@@ -200,13 +212,16 @@ class ArduCopter(CopterAuto, CopterFailsafes, CopterFence, CopterGuidance, Guide
         return True
 
     def _rtl_start(self, state: VehicleState) -> None:
-        """ModeRTL::compute_return_target: the altitude above home to return at."""
-        home_n, home_e, home_d = self.home_ned
+        """ModeRTL::compute_return_target: where to return (home or a rally point) and the altitude above home to
+        return at."""
+        home_d = self.home_ned[2]
+        target_n, target_e, target_alt = self.rtl_return_target(state)
+        self.rtl_target = (target_n, target_e)
         alt = home_d - state.down_m
         min_alt = max(RTL_ALT_MIN_M, alt + max(0.0, self.params["RTL_CLIMB_MIN"] / 100.0))
-        target = max(self.params["RTL_ALT"] / 100.0, min_alt)
+        target = max(max(target_alt, 0.0), max(self.params["RTL_ALT"] / 100.0, min_alt))
         if self.params["RTL_CONE_SLOPE"] >= RTL_MIN_CONE_SLOPE:
-            distance = math.hypot(state.north_m - home_n, state.east_m - home_e)
+            distance = math.hypot(state.north_m - target_n, state.east_m - target_e)
             target = min(target, max(distance * self.params["RTL_CONE_SLOPE"], min_alt))
         self.rtl_return_down_m = home_d - max(target, alt)
         self.rtl_state, self._rtl_loiter_since_s = "climb", None

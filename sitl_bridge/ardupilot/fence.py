@@ -1,4 +1,5 @@
-"""ArduCopter's parameter fences: the circle (FENCE_RADIUS), the ceiling (FENCE_ALT_MAX) and the floor (FENCE_ALT_MIN).
+"""ArduCopter's fences: the circle (FENCE_RADIUS), the ceiling (FENCE_ALT_MAX), the floor (FENCE_ALT_MIN) and the
+uploaded polygons and circles (``sitl_bridge.ardupilot.polyfence``), each when FENCE_TYPE has its bit.
 
 The runner's guard (``autonomy/geofence.py``) lives in the companion computer's software; the autopilot's fence is
 the layer beneath it, and what stops the drone when that software misbehaves. A mixin of the ArduCopter
@@ -9,7 +10,9 @@ personality (:class:`sitl_bridge.ardupilot.autopilot.ArduCopter`). Read in
   ``pre_arm_check`` texts, ``print_fence_message``) and ``ArduCopter/fence.cpp`` ``Copter::fence_check`` (the action
   on a new breach; landed: disarm; more than 100 m out: LAND), ``Copter::set_mode`` (a mode change during a breach
   starts the 10 s manual recovery: ``AC_Fence::check`` still tracks breaches, done last "so that _breached_fences is
-  correct", but returns no new one, so nothing acts).
+  correct", but returns no new one, so nothing acts); ``AC_Fence::present`` (the polygon bit counts only with an
+  uploaded fence loaded), ``check_fence_polygon`` (a new breach only when not breached already: no backup fence),
+  ``get_breach_distance``.
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.ardupilot.modes import CopterMode
+from sitl_bridge.ardupilot.polyfence import CopterPolyFence
 from sitl_bridge.multirotor import VehicleState
 
 ALT_MAX, CIRCLE, POLYGON, ALT_MIN = 1, 2, 4, 8  # AC_FENCE_TYPE_* bits of FENCE_TYPE
@@ -35,34 +39,47 @@ def fence_names(fences: int) -> str:
     return f"{listed} fence" + ("s" if len(names) > 1 else "")
 
 
-class CopterFence:
-    """ArduCopter's circle (FENCE_RADIUS), ceiling (FENCE_ALT_MAX) and floor (FENCE_ALT_MIN) fences."""
+class CopterFence(CopterPolyFence):
+    """ArduCopter's circle (FENCE_RADIUS), ceiling (FENCE_ALT_MAX), floor (FENCE_ALT_MIN) and uploaded fences."""
 
     fence_breaches = 0  # AC_Fence::_breached_fences
     _fence_floor_enabled = False
     _fence_backups: dict[int, float] = {}  # per fence: the distance past the fence that is a new breach
     _fence_recovery_until_s = -math.inf
     _fence_checked_s = -math.inf
+    _polygon_outside = False  # AC_PolyFence_loader::breached at the last check
 
     def _fence_configured(self) -> int:
-        """FENCE_TYPE's fences that are present (AC_Fence::present: a polygon needs an upload, never made here)."""
-        return int(self.params["FENCE_TYPE"]) & (ALT_MAX | CIRCLE | ALT_MIN) if self.params["FENCE_ENABLE"] else 0
+        """FENCE_TYPE's fences that are present, when the fence is enabled (AC_Fence::present: the polygon bit only
+        with uploaded areas loaded)."""
+        if not self.params["FENCE_ENABLE"]:
+            return 0
+        present = ALT_MAX | CIRCLE | ALT_MIN | (POLYGON if self.polyfence_areas else 0)
+        return int(self.params["FENCE_TYPE"]) & present
 
     def _fence_distances(self, state: VehicleState) -> dict[int, float]:
-        """How far past each fence the vehicle is (negative: inside)."""
+        """How far past each fence the vehicle is (negative: inside); the uploaded fence's only when present."""
         home_n, home_e, home_d = self.home_ned
         altitude = home_d - state.down_m
-        return {ALT_MAX: altitude - self.params["FENCE_ALT_MAX"], ALT_MIN: self.params["FENCE_ALT_MIN"] - altitude,
-                CIRCLE: math.hypot(state.north_m - home_n, state.east_m - home_e) - self.params["FENCE_RADIUS"]}
+        distances = {ALT_MAX: altitude - self.params["FENCE_ALT_MAX"],
+                     ALT_MIN: self.params["FENCE_ALT_MIN"] - altitude,
+                     CIRCLE: math.hypot(state.north_m - home_n, state.east_m - home_e) - self.params["FENCE_RADIUS"]}
+        if self.polyfence_areas:
+            self._polygon_outside, distances[POLYGON] = self.polyfence_breach(state.north_m, state.east_m)
+        return distances
 
     def fence_prearm_failure(self) -> str | None:
-        """AC_Fence::pre_arm_check, the parts that apply to parameter fences."""
+        """AC_Fence::pre_arm_check, the parts that apply to the emulated fences."""
         if not self.params["FENCE_ENABLE"]:
             return None
         if not self._fence_configured():
             return "Fences enabled, but none selected"
-        if self._fence_configured() & CIRCLE and not self.gps_ok:
+        fence_type = int(self.params["FENCE_TYPE"])
+        if fence_type & (CIRCLE | POLYGON) and not self.gps_ok:
             return "Fence requires position"
+        polygon_failure = self.polyfence_prearm_failure() if fence_type & POLYGON else None
+        if polygon_failure:
+            return polygon_failure
         margin, alt_max, alt_min = (self.params[name] for name in ("FENCE_MARGIN", "FENCE_ALT_MAX", "FENCE_ALT_MIN"))
         if self.params["FENCE_RADIUS"] < margin:
             return "Circle FENCE_MARGIN is greater than FENCE_RADIUS"
@@ -100,13 +117,14 @@ class CopterFence:
         for fence, past in distances.items():
             if not configured & fence or (fence == ALT_MIN and not self._fence_floor_enabled):
                 continue
-            if past < 0:
+            if not (self._polygon_outside if fence == POLYGON else past >= 0):
                 self.fence_breaches &= ~fence
                 continue
             if not self.fence_breaches & fence or past >= self._fence_backups.get(fence, math.inf):
                 new |= fence
                 self.fence_breaches |= fence
-                self._fence_backups = {**self._fence_backups, fence: past + BACKUP_DISTANCE_M}
+                if fence != POLYGON:  # check_fence_polygon keeps no backup fence
+                    self._fence_backups = {**self._fence_backups, fence: past + BACKUP_DISTANCE_M}
         if (configured & ALT_MIN and not self._fence_floor_enabled and not landing_or_landed
                 and -distances[ALT_MIN] >= self.params["FENCE_MARGIN"]):  # AC_Fence::auto_enable_fence_floor
             self._fence_floor_enabled = True

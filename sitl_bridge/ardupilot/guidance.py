@@ -1,7 +1,7 @@
 """How ArduCopter's flight modes fly: the velocity command of a takeoff, GUIDED, LAND and RTL for one tick.
 
-A mixin of :class:`sitl_bridge.ardupilot.ArduCopter` (it uses the autopilot's params, setpoint, home and RTL
-state); ``ArduCopter.guidance`` picks the mode's command every tick. The rules follow ArduCopter's
+A mixin of :class:`sitl_bridge.ardupilot.autopilot.ArduCopter` (it uses the autopilot's params, setpoint, home and
+RTL state); ``ArduCopter.guidance`` picks the mode's command every tick. The rules follow ArduCopter's
 ModeGuided::velaccel_control_run (GUID_TIMEOUT), Mode::land_run_vertical_control and ModeRTL's states (climb,
 return, loiter at home, final descent or land), as the methods' notes say.
 """
@@ -14,7 +14,7 @@ from sitl_bridge.autopilot_base import ARRIVED_RADIUS_M
 from sitl_bridge.dynamics import velocity_toward
 from sitl_bridge.multirotor import VehicleState, VelocityCommand
 
-HOME_REACHED_M = 1.0  # RTL's return leg ends this close to home (horizontally)
+HOME_REACHED_M = 1.0  # RTL's return leg ends this close to its target (horizontally)
 
 
 class CopterGuidance:
@@ -57,8 +57,9 @@ class CopterGuidance:
         return VelocityCommand(horizontal.north_mps, horizontal.east_mps, speed)
 
     def _rtl_command(self, now: float, state: VehicleState) -> VelocityCommand:
-        """ModeRTL: INITIAL_CLIMB, RETURN_HOME, LOITER_AT_HOME, then FINAL_DESCENT or LAND."""
-        home_n, home_e, home_d = self.home_ned
+        """ModeRTL: INITIAL_CLIMB, RETURN_HOME, LOITER_AT_HOME, then FINAL_DESCENT or LAND, over the return target
+        (home or a rally point)."""
+        (target_n, target_e), home_d = self.rtl_target, self.home_ned[2]
         speed_xy = (self.params["RTL_SPEED"] or self.params["WPNAV_SPEED"]) / 100.0
         if self.rtl_state == "climb":
             if state.down_m - self.rtl_return_down_m <= ARRIVED_RADIUS_M:
@@ -66,12 +67,13 @@ class CopterGuidance:
             return velocity_toward(state, state.north_m, state.east_m, self.rtl_return_down_m, self.airframe,
                                    speed_xy_mps=0.0, speed_z_mps=self.params["WPNAV_SPEED_UP"] / 100.0)
         if self.rtl_state == "return":
-            if math.hypot(state.north_m - home_n, state.east_m - home_e) < HOME_REACHED_M:
+            if math.hypot(state.north_m - target_n, state.east_m - target_e) < HOME_REACHED_M:
                 self.rtl_state, self._rtl_loiter_since_s = "loiter", now
-            return velocity_toward(state, home_n, home_e, self.rtl_return_down_m, self.airframe, speed_xy_mps=speed_xy)
+            return velocity_toward(state, target_n, target_e, self.rtl_return_down_m, self.airframe,
+                                   speed_xy_mps=speed_xy)
         if self.rtl_state == "loiter" and now - self._rtl_loiter_since_s >= self.params["RTL_LOIT_TIME"] / 1000.0:
             self.rtl_state = "land" if self.params["RTL_ALT_FINAL"] <= 0 else "final"
         if self.rtl_state == "land":
-            return self._landing_command(now, state, home_n, home_e)
+            return self._landing_command(now, state, target_n, target_e)
         down = home_d - self.params["RTL_ALT_FINAL"] / 100.0 if self.rtl_state == "final" else self.rtl_return_down_m
-        return velocity_toward(state, home_n, home_e, down, self.airframe, speed_xy_mps=speed_xy)
+        return velocity_toward(state, target_n, target_e, down, self.airframe, speed_xy_mps=speed_xy)

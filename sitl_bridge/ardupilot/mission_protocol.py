@@ -1,7 +1,7 @@
 """The vehicle's side of the MAVLink mission protocol as ArduPilot runs it (the ArduCopter personality).
 
-Read in ArduPilot master at 9070097 (2025-07, through a fork whose only own commits move submodules, as the
-repository is too large for the search tools; docs/sitl.md, "ArduPilot missions", has the references):
+Read in ArduPilot master at 9070097 (through a fork whose only own commits move submodules, as the repository is
+too large for the search tools; docs/sitl.md, "ArduPilot missions", has the references):
 ``libraries/GCS_MAVLink/MissionItemProtocol.cpp`` and ``MissionItemProtocol_Waypoints.cpp``, ``GCS_Common.cpp``
 (``handle_mission_item``, ``handle_mission_set_current``), ``libraries/AP_Mission/AP_Mission.cpp``
 (``mavlink_int_to_mission_cmd``, ``mission_cmd_to_mavlink_int``, ``clear``). Where it differs from PX4's:
@@ -17,25 +17,21 @@ repository is too large for the search tools; docs/sitl.md, "ArduPilot missions"
 * MISSION_CLEAR_ALL is refused (ERROR) while armed and the mission runs; MISSION_SET_CURRENT answers with a
   MISSION_CURRENT at once; guided-mode items (MISSION_ITEM with current 2 or 3) go to GUIDED, not the mission.
 
-Only the MISSION type is stored; fence and rally uploads get UNSUPPORTED (the fences are the FENCE_* parameters).
+The transfer itself is the protocol every mission type shares (``sitl_bridge.ardupilot.item_protocol``); the fence
+and rally types are ``sitl_bridge.ardupilot.fence_protocol`` and ``sitl_bridge.ardupilot.rally``.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_bridge.ardupilot.item_protocol import ACCEPTED, ItemProtocol, Upload
 from sitl_bridge.ardupilot.targets import LOCATION_ALT_MAX_M
 from sitl_bridge.endpoint import Endpoint
-from sitl_bridge.mission_items import ABSOLUTE_FRAMES, MISSION, RELATIVE_FRAMES, MissionItem, item_message
+from sitl_bridge.mission_items import ABSOLUTE_FRAMES, MISSION, RELATIVE_FRAMES, MissionItem
 
-RETRY_S = 1.0  # MissionItemProtocol::update: the request again after a second without the item
-TIMEOUT_S = 8.0  # upload_timeout_ms
-MAX_ITEMS = 650  # (storage - 4) / 15 in SITL's mission storage areas, home included
-
-ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 # The commands the AUTO mode here flies (sitl_bridge.ardupilot.auto); ArduCopter takes many more
 LOCATION_COMMANDS = (mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
                      mavlink.MAV_CMD_NAV_LOITER_TIME, mavlink.MAV_CMD_NAV_LOITER_UNLIM)
@@ -69,161 +65,69 @@ def parse_copter_item(msg: mavlink.MAVLink_message) -> MissionItem | int:
     return MissionItem(msg.command, params, lat, lon, msg.z, positional=True, relative=msg.frame in RELATIVE_FRAMES)
 
 
-@dataclass
-class _Upload:
-    endpoint: Endpoint
-    partner: tuple[int, int]
-    count: int
-    next_seq: int = 0  # item 0 (home's place) is requested and checked too
-    items: list[MissionItem] | None = None
-    last_received_s: float = 0.0
-    last_request_s: float = -math.inf
-
-
-class CopterMissionTransfer:
-    """ArduPilot's mission protocol for one vehicle: ``items`` is the stored mission without home (item 1 first).
+class CopterMissionTransfer(ItemProtocol):
+    """ArduPilot's mission protocol for one vehicle (MissionItemProtocol_Waypoints): ``items`` is the stored mission
+    without home (item 1 first); the transfer rules are ``ItemProtocol``'s.
 
     ``home()`` gives home as (lat, lon, AMSL altitude) or None; ``running()`` whether the mission is being flown
     (armed, in AUTO); ``on_mission(items)`` hands a completed upload or a clear to the AUTO mode;
-    ``current_seq()`` / ``set_current(seq) -> bool`` read and move the mission's current command; ``send_current()``
-    sends MISSION_CURRENT on every link; ``text(text, severity)`` sends STATUSTEXT."""
+    ``set_current(seq) -> bool`` moves the mission's current command; ``send_current()`` sends MISSION_CURRENT on
+    every link; ``text(text, severity)`` sends STATUSTEXT."""
+
+    MISSION_TYPE = MISSION
+    MAX_ITEMS = 650  # (storage - 4) / 15 in SITL's mission storage areas, home included
+    TIMEOUT_TEXT = "Mission upload timeout"
 
     def __init__(self, home: Callable[[], tuple[float, float, float] | None], running: Callable[[], bool],
                  on_mission: Callable[[list[MissionItem]], None], set_current: Callable[[int], bool],
                  send_current: Callable[[int], None], text: Callable[[str, int], None]):
-        self.items: list[MissionItem] = []
+        super().__init__(on_mission, text)
         self.uploaded = False  # MIS_TOTAL stays 0, home not counted, until a mission is uploaded (4.5)
-        self.upload: _Upload | None = None
-        self._home, self._running, self._on_mission = home, running, on_mission
-        self._set_current, self._send_current, self._text = set_current, send_current, text
+        self._home, self._running = home, running
+        self._set_current, self._send_current = set_current, send_current
 
     @property
     def count(self) -> int:
         """MIS_TOTAL: the items with home, or 0 before any upload (and after a clear)."""
         return len(self.items) + 1 if self.uploaded else 0
 
-    # ------------------------------------------------------------------ upload
-    def on_count(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.mission_type != MISSION:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_UNSUPPORTED, msg.mission_type)
-            return
-        if self.upload is not None and self.upload.partner != partner:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_DENIED)
-            return
-        if msg.count > MAX_ITEMS:
-            self._text(f"Only {MAX_ITEMS} items are supported", mavlink.MAV_SEVERITY_WARNING)
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_NO_SPACE)
-            return
-        self.upload = None
-        if msg.count == 0:
-            self._complete(endpoint, partner, [], uploaded=False)
-            return
-        self.upload = _Upload(endpoint, partner, msg.count, next_seq=0, items=[], last_received_s=now)
-        self._request(now)
+    def item_count(self) -> int:
+        return self.count
 
-    def on_item(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> bool:
-        """An item of an upload; False when it is not one (a guided-mode item, for GUIDED to take)."""
-        if msg.current in (2, 3):
-            return False
-        partner, up = (msg.get_srcSystem(), msg.get_srcComponent()), self.upload
-        if up is None:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR)
-            return True
-        if partner != up.partner:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_DENIED)
-            return True
-        if msg.seq != up.next_seq:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_INVALID_SEQUENCE)  # the upload goes on
-            return True
+    def take(self, seq: int, msg: mavlink.MAVLink_message, upload: Upload) -> int:
         item = parse_copter_item(msg)
         if isinstance(item, int):
-            self.upload = None
-            self._ack(endpoint, partner, item)
-            return True
-        assert up.items is not None
-        if msg.seq > 0:  # item 0 is home's place: checked, not kept
-            up.items.append(item)
-        up.next_seq, up.last_received_s = up.next_seq + 1, now
-        if up.next_seq < up.count:
-            self._request(now)
-        else:
-            self._complete(up.endpoint, up.partner, up.items, uploaded=True)
-        return True
+            return item
+        if seq > 0:  # item 0 is home's place: checked, not kept
+            upload.items.append(item)
+        return ACCEPTED
 
-    def _request(self, now: float) -> None:
-        up = self.upload
-        assert up is not None
-        up.endpoint.send(mavlink.MAVLink_mission_request_message(*up.partner, up.next_seq, MISSION))
-        up.last_request_s = now
-
-    def _complete(self, endpoint: Endpoint, partner: tuple[int, int], items: list[MissionItem],
-                  uploaded: bool) -> None:
-        self.upload, self.items, self.uploaded = None, list(items), uploaded
-        self._on_mission(self.items)
+    def complete(self, upload: Upload) -> int:
+        self.items, self.uploaded = list(upload.items), upload.count > 0
+        self._on_change(self.items)
         self._text("Flight plan received", mavlink.MAV_SEVERITY_INFO)
-        self._ack(endpoint, partner, ACCEPTED)
+        return ACCEPTED
 
-    def tick(self, now: float) -> None:
-        up = self.upload
-        if up is None:
-            return
-        if now - up.last_received_s > TIMEOUT_S:
-            self.upload = None
-            self._text("Mission upload timeout", mavlink.MAV_SEVERITY_WARNING)
-            self._ack(up.endpoint, up.partner, mavlink.MAV_MISSION_OPERATION_CANCELLED)
-        elif now - up.last_request_s >= RETRY_S:
-            self._request(now)
+    def clear(self) -> int:
+        if self._running():  # AP_Mission::clear: not while armed and running
+            return mavlink.MAV_MISSION_ERROR
+        self.items, self.uploaded = [], False
+        self._on_change([])
+        return ACCEPTED
 
-    # ------------------------------------------------------------------ download, clear, set current
-    def on_request_list(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner = (msg.get_srcSystem(), msg.get_srcComponent())
-        if self.upload is not None:
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_DENIED, msg.mission_type)
-            return
-        count = self.count if msg.mission_type == MISSION else 0
-        endpoint.send(mavlink.MAVLink_mission_count_message(*partner, count, msg.mission_type))
-
-    def on_request(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner, as_int = (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_type() == "MISSION_REQUEST_INT"
-        if msg.mission_type != MISSION:
-            return
+    def get_item(self, seq: int) -> tuple[MissionItem, int] | int:
         home = self._home()
-        if msg.seq >= max(self.count, 1) or (msg.seq == 0 and home is None):
-            if as_int:
-                endpoint.send(mavlink.MAVLink_mission_count_message(*partner, self.count, MISSION))
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_INVALID_SEQUENCE)
-            return
-        if msg.seq == 0:
+        if seq >= max(self.count, 1) or (seq == 0 and home is None):
+            return mavlink.MAV_MISSION_INVALID_SEQUENCE
+        if seq == 0:
             item = MissionItem(mavlink.MAV_CMD_NAV_WAYPOINT, (0.0, 0.0, 0.0, 0.0), *home, positional=True)
         else:
-            item = self.items[msg.seq - 1]
+            item = self.items[seq - 1]
         # current 0 (get_item compares a command id with an index), and the float frames whatever the request
         # (mission_cmd_to_mavlink_int): GLOBAL_RELATIVE_ALT or GLOBAL, GLOBAL for a command without a place
-        sent = item_message(item, msg.seq, False, partner, as_int=as_int)
-        sent.frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT if item.relative else mavlink.MAV_FRAME_GLOBAL
-        endpoint.send(sent)
-
-    def on_ack(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        """ArduPilot ignores a client's MISSION_ACK ("not used")."""
-
-    def on_clear_all(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
-        partner = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.mission_type not in (MISSION, mavlink.MAV_MISSION_TYPE_ALL):
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_UNSUPPORTED, msg.mission_type)
-            return
-        if self._running():  # AP_Mission::clear: not while armed and running
-            self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, msg.mission_type)
-            return
-        self.upload, self.items, self.uploaded = None, [], False
-        self._on_mission([])
-        self._ack(endpoint, partner, ACCEPTED, msg.mission_type)
+        return item, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT if item.relative else mavlink.MAV_FRAME_GLOBAL
 
     def on_set_current(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         """No ACK: a MISSION_CURRENT with the requested seq says it worked (nothing: it did not)."""
         if self._set_current(msg.seq):
             self._send_current(msg.seq)
-
-    @staticmethod
-    def _ack(endpoint: Endpoint, partner: tuple[int, int], result: int, mission_type: int = MISSION) -> None:
-        endpoint.send(mavlink.MAVLink_mission_ack_message(*partner, result, mission_type))

@@ -3,7 +3,8 @@
 Sources (ArduPilot/ardupilot, read through the search tools; see docs/sitl.md): ArduCopter/Parameters.cpp
 (SYSID_MYGCS, RTL_*, FS_GCS_ENABLE, LAND_SPEED*, DISARM_DELAY, GUID_TIMEOUT, FS_GCS_TIMEOUT, FS_OPTIONS),
 libraries/AC_WPNav/AC_WPNav.cpp (WPNAV_SPEED 1000, WPNAV_SPEED_UP 250, WPNAV_SPEED_DN 150),
-libraries/AC_Fence/AC_Fence.cpp (FENCE_*),
+libraries/AC_Fence/AC_Fence.cpp (FENCE_*), libraries/AP_Rally/AP_Rally.cpp (RALLY_LIMIT_KM 0.3 and RALLY_INCL_HOME 1
+on Copter),
 libraries/AP_BattMonitor/AP_BattMonitor_Params.cpp (BATT_MONITOR with AP_PARAM_FLAG_ENABLE, BATT_LOW_VOLT 10.5 V
 on Copter, the others 0 = off) and
 libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp (SRn_* stream rates: 0 on Copter, so nothing streams until a
@@ -56,10 +57,10 @@ ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
               "AUTO mode: bit 0 allows arming in AUTO, bit 1 a takeoff without raising the throttle"),
     ParamSpec("WPNAV_RADIUS", REAL32, 200.0, 5.0, 1000.0, "AUTO: a waypoint is reached this close (cm)"),
     ParamSpec("DISARM_DELAY", INT8, 10, 0, 127, "auto-disarm this long after landing outside LAND/RTL; 0 never (s)"),
-    ParamSpec("FENCE_ENABLE", INT8, 0, 0, 1, "the circle and altitude fences: 0 off, 1 on"),
+    ParamSpec("FENCE_ENABLE", INT8, 0, 0, 1, "the fences: 0 off, 1 on"),
     ParamSpec("FENCE_TYPE", INT8, 7, 0, 15,
-              "fences bitmask: 1 max altitude, 2 circle around home, 4 polygons (none can be uploaded here), 8 min "
-              "altitude"),
+              "fences bitmask: 1 max altitude, 2 circle around home, 4 uploaded inclusion/exclusion polygons and "
+              "circles, 8 min altitude"),
     ParamSpec("FENCE_ACTION", INT8, 1, 0, 5, "breach action: 0 report only, 1 RTL or land, 2 land, 4 brake or land",
               allowed=(0, 1, 2, 4)),
     ParamSpec("FENCE_ALT_MAX", REAL32, 100.0, 10.0, 1000.0, "fence ceiling above home (m)"),
@@ -67,6 +68,10 @@ ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
               "fence floor above home (m), armed once the vehicle is FENCE_MARGIN above it, off while landing"),
     ParamSpec("FENCE_RADIUS", REAL32, 300.0, 30.0, 10000.0, "circle fence radius around home (m)"),
     ParamSpec("FENCE_MARGIN", REAL32, 2.0, 1.0, 10.0, "distance the autopilot keeps from a fence (m)"),
+    ParamSpec("RALLY_LIMIT_KM", REAL32, 0.3, 0.0, 1000.0,
+              "RTL goes home when the closest rally point is further than this; 0: no limit (km)"),
+    ParamSpec("RALLY_INCL_HOME", INT8, 1, 0, 1,
+              "1: RTL goes to the closest of home and the rally points; 0: to the closest rally point"),
     # BATT_MONITOR carries AP_PARAM_FLAG_ENABLE: while it is 0 every other BATT_* parameter is hidden (not listed,
     # not readable, not settable) and there is no battery failsafe. ArduPilot's fallback default is 0; boards with
     # a power module set 4 in their hwdef (HAL_BATT_MONITOR_DEFAULT), as this simulated one does.

@@ -3,56 +3,32 @@
 The runner's guard (``autonomy/geofence.py``) lives in the companion computer's software; the autopilot's fence is
 the layer beneath it, and what stops the drone when that software misbehaves. A mixin of the PX4 personality
 (:class:`sitl_bridge.px4.autopilot.Px4Autopilot`); the areas come from ``sitl_bridge.px4.mission_protocol``
-(polygons and circles). Read in
+(polygons and circles, read by ``sitl_bridge.fence_areas``). Read in
 
 * PX4-Autopilot: ``src/modules/navigator/geofence_params.yaml`` (GF_ACTION 2 = Hold, GF_MAX_HOR_DIST and
   GF_MAX_VER_DIST 0 = off), ``Navigator::geofence_breach_check`` (every 200 ms while GF_ACTION is not None; with
   GF_PREDICT at its default 0 the test point is the position itself), ``Geofence::isCloserThanMaxDistToHome`` /
   ``isBelowMaxAltitude`` (outside from ``>=`` the limit), ``checkPointAgainstAllGeofences`` (the cylinder AND the
-  uploaded areas: inside every inclusion polygon or circle and outside every exclusion, since f2aabe968e8, 2023-11;
-  a circle is ``d² < r²``, a polygon Franklin's PNPOLY), ``_updateFence`` (an area that does not contain home, or,
-  flying with GF_ACTION set, the vehicle, is dropped with a text; no areas: no uploaded fence), commander ``HealthAndArmingChecks/checks/geofenceCheck.cpp``
-  (the texts; arming refused while breached) and ``failsafe/failsafe.cpp`` ``fromGfActParam`` (the action; a Hold
-  is left by any mode switch and cleared by it, so it acts again only on a new breach).
+  uploaded areas: inside every inclusion polygon or circle and outside every exclusion, since f2aabe968e8; a
+  circle is ``d² < r²``, a polygon Franklin's PNPOLY), ``_updateFence`` (an area that does not contain home, or,
+  flying with GF_ACTION set, the vehicle, is dropped with a text; no areas: no uploaded fence), commander
+  ``HealthAndArmingChecks/checks/geofenceCheck.cpp`` (the texts; arming refused while breached) and
+  ``failsafe/failsafe.cpp`` ``fromGfActParam`` (the action; a Hold is left by any mode switch and cleared by it, so
+  it acts again only on a new breach).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_bridge.fence_areas import FenceArea, fence_areas
 from sitl_bridge.mission_items import MissionItem
 from sitl_bridge.multirotor import VehicleState
 from sitl_bridge.px4.modes import FlightMode
 
 PX4_CHECK_INTERVAL_S = 0.2  # Navigator's GEOFENCE_CHECK_INTERVAL_US
 PX4_ACTIONS = {2: FlightMode.HOLD, 3: FlightMode.RTL, 5: FlightMode.LAND}  # GF_ACTION; 1 warns only
-
-
-@dataclass(frozen=True)
-class FenceArea:
-    """One uploaded area: a polygon (vertices, north/east m) or a circle (centre and radius), to stay in or out of."""
-
-    inclusion: bool
-    vertices: tuple[tuple[float, float], ...] = ()
-    centre: tuple[float, float] | None = None
-    radius_m: float = 0.0
-
-    def contains(self, north: float, east: float) -> bool:
-        if self.centre is not None:  # Geofence::insideCircle
-            return (north - self.centre[0]) ** 2 + (east - self.centre[1]) ** 2 < self.radius_m ** 2
-        inside, j = False, len(self.vertices) - 1  # Geofence::insidePolygon (PNPOLY; north as lat, east as lon)
-        for i, (n_i, e_i) in enumerate(self.vertices):
-            n_j, e_j = self.vertices[j]
-            if (e_i >= east) != (e_j >= east) and north <= (n_j - n_i) * (east - e_i) / (e_j - e_i) + n_i:
-                inside = not inside
-            j = i
-        return inside
-
-    def passes(self, north: float, east: float) -> bool:
-        """checkPointAgainstPolygonCircle: inside an inclusion, outside an exclusion."""
-        return self.contains(north, east) == self.inclusion
 
 
 class Px4Geofence:
@@ -66,20 +42,8 @@ class Px4Geofence:
     def load_fence(self, items: list[MissionItem], now: float, state: VehicleState) -> None:
         """Geofence::_updateFence: the uploaded items as areas, each kept only if home (when known) passes it and,
         flying with GF_ACTION set, the vehicle does too."""
-        areas, index = [], 0
-        while index < len(items):
-            item = items[index]
-            inclusion = item.command in (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
-                                         mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION)
-            if item.command in (mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
-                area, index = FenceArea(inclusion, centre=self.ned_of(item.x, item.y), radius_m=item.params[0]), index + 1
-            elif item.command == mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT:
-                index += 1
-                continue
-            else:
-                count = int(item.params[0] + 0.5)
-                corners = items[index:index + count]
-                area, index = FenceArea(inclusion, vertices=tuple(self.ned_of(c.x, c.y) for c in corners)), index + count
+        areas = []
+        for area in fence_areas(items, self.ned_of):
             if self.gps_ok and not area.passes(*self.home_ned[:2]):
                 self._event(now, "Geofence invalid, doesn't contain Home position\t", mavlink.MAV_SEVERITY_CRITICAL)
             elif int(self.params["GF_ACTION"]) and not state.on_ground and not area.passes(state.north_m, state.east_m):

@@ -1,7 +1,7 @@
 """The vehicle's side of the MAVLink mission protocol, as PX4's MavlinkMissionManager runs it.
 
-Read in PX4-Autopilot ``src/modules/mavlink/mavlink_mission.cpp`` (main at 02e73e3, 2026-03; docs/sitl.md, "PX4
-missions", has the line references and what differs from v1.14):
+Read in PX4-Autopilot ``src/modules/mavlink/mavlink_mission.cpp`` (main at 02e73e3; docs/sitl.md, "PX4 missions",
+has the line references and what differs from v1.14):
 
 * **upload**: MISSION_COUNT, then MISSION_REQUEST_INT for seq 0, 1, ... (re-sent after 0.25 s without the item),
   MISSION_ITEM_INT for each, and MISSION_ACK ACCEPTED once the last one is in; only then does the mission replace
@@ -16,9 +16,12 @@ missions", has the line references and what differs from v1.14):
 * PX4 answers in the ``_INT`` form until a client uses the float messages (a sticky "int mode"), and switches form
   when a client answers a request with MISSION_ACK UNSUPPORTED.
 
-The MISSION and FENCE types are stored (a fence: polygon vertices and circles, inclusion or exclusion, at most 64
-items; a polygon of fewer than 3 vertices is an ERROR; ``sitl_bridge.px4.geofence`` flies it); a rally upload gets
-MAV_MISSION_UNSUPPORTED and its download lists nothing.
+All three types are stored, each in its own storage (dataman's DM_KEY_WAYPOINTS_OFFBOARD, DM_KEY_FENCE_POINTS,
+DM_KEY_SAFE_POINTS): a fence holds polygon vertices and circles, inclusion or exclusion, at most 64 items, a polygon
+of fewer than 3 vertices being an ERROR (``sitl_bridge.px4.geofence`` flies it); the rally type at most 32 items,
+stored whatever they are (``parse_mavlink_mission_item``'s items: handle_mission_item_both checks the command only
+for the MISSION type, which refuses fence and rally items with an ERROR), of which RTL uses the rally points
+(``sitl_bridge.px4.rally``).
 """
 from __future__ import annotations
 
@@ -29,15 +32,22 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_bridge.endpoint import Endpoint
+from sitl_bridge.fence_areas import POLYGON_VERTICES
 from sitl_bridge.mission_items import (
-    ABSOLUTE_FRAMES, FENCE, MISSION, RELATIVE_FRAMES, MissionItem, item_message,
+    ABSOLUTE_FRAMES,
+    FENCE,
+    MISSION,
+    RALLY,
+    RELATIVE_FRAMES,
+    MissionItem,
+    item_message,
 )
 
 RETRY_S = 0.25  # MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: re-request an item after this long without it
 TIMEOUT_S = 5.0  # MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a transfer silent this long is abandoned
 MAX_ITEMS = 500  # CONFIG_NUM_MISSION_ITMES_SUPPORTED's default (PX4 SITL builds allow 10,000)
 
-CAPACITY = {MISSION: MAX_ITEMS, FENCE: 64}  # DM_KEY_FENCE_POINTS_MAX
+CAPACITY = {MISSION: MAX_ITEMS, FENCE: 64, RALLY: 32}  # DM_KEY_FENCE_POINTS_MAX, DM_KEY_SAFE_POINTS_MAX
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 
 INT_ONLY_FRAMES = (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
@@ -51,8 +61,6 @@ NAVIGATION_COMMANDS = (mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_NAV_RETU
 FENCE_COMMANDS = (mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
                   mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
                   mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION)
-POLYGON_VERTICES = (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
-                    mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
 # Camera and gimbal items (what MAVSDK's MissionItem adds for its camera and gimbal fields): stored, and passed over
 # in flight with a log line, since the simulator has no camera triggering or gimbal.
 PAYLOAD_COMMANDS = (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_IMAGE_STOP_CAPTURE,
@@ -63,17 +71,22 @@ PAYLOAD_COMMANDS = (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_IMAGE_S
 
 
 def parse_item(msg: mavlink.MAVLink_message, mission_type: int = MISSION) -> MissionItem | int:
-    """A MISSION_ITEM(_INT) of a mission or fence upload as PX4's parse_mavlink_mission_item and
-    handle_mission_item_both read it, or the MAV_MISSION_RESULT refusing it."""
+    """A MISSION_ITEM(_INT) of an upload as PX4's parse_mavlink_mission_item and handle_mission_item_both read it,
+    or the MAV_MISSION_RESULT refusing it. A rally point keeps no parameters (format_mavlink_mission_item sends
+    param1-4 as 0)."""
     is_int = msg.get_type() == "MISSION_ITEM_INT"
     params = (msg.param1, msg.param2, msg.param3, msg.param4)
-    if (mission_type == FENCE) != (msg.command in FENCE_COMMANDS):
-        return mavlink.MAV_MISSION_ERROR  # a fence item in a mission, or anything else in a fence
+    if mission_type == MISSION and msg.command in FENCE_COMMANDS + (mavlink.MAV_CMD_NAV_RALLY_POINT,):
+        return mavlink.MAV_MISSION_ERROR  # a fence or rally item in a mission
+    if mission_type == FENCE and msg.command not in FENCE_COMMANDS:
+        return mavlink.MAV_MISSION_ERROR  # not in PX4, which stores a fence's other items unused
     if msg.command in POLYGON_VERTICES and not (math.isfinite(msg.param1) and msg.param1 + 0.5 >= 3):
         return mavlink.MAV_MISSION_ERROR  # vertex_count < 3
     if msg.frame in ABSOLUTE_FRAMES + RELATIVE_FRAMES and (is_int or msg.frame not in INT_ONLY_FRAMES):
-        if msg.command not in POSITION_COMMANDS + FENCE_COMMANDS:
+        if msg.command not in POSITION_COMMANDS + FENCE_COMMANDS + (mavlink.MAV_CMD_NAV_RALLY_POINT,):
             return mavlink.MAV_MISSION_UNSUPPORTED
+        if msg.command == mavlink.MAV_CMD_NAV_RALLY_POINT:
+            params = (0.0, 0.0, 0.0, 0.0)
         scale = 1e-7 if is_int else 1.0
         # Not in PX4, which stores what it gets: a position that is not one would fly the simulator into NaNs
         if not (math.isfinite(msg.x) and abs(msg.x * scale) <= 90.0):
@@ -109,22 +122,26 @@ class _Transfer:
 
 
 class MissionTransfer:
-    """The mission protocol of one vehicle: the stored mission and fence, and at most one transfer at a time.
+    """The mission protocol of one vehicle: the stored mission, fence and rally points, and at most one transfer at
+    a time.
 
     ``on_mission(items, current_seq)`` hands a completed mission upload (or a clear: no items) to the navigator,
-    with the uploaded item marked current (-1: none); ``on_fence(items)`` a fence; ``current_seq()`` reads the
-    navigator's current item for a download; ``set_current(seq)`` asks the navigator to jump; ``text(text,
-    severity)`` sends PX4's STATUSTEXTs.
+    with the uploaded item marked current (-1: none); ``on_fence(items)`` a fence, ``on_rally(items)`` the rally
+    points; ``current_seq()`` reads the navigator's current item for a download; ``set_current(seq)`` asks the
+    navigator to jump; ``text(text, severity)`` sends PX4's STATUSTEXTs.
     """
 
     def __init__(self, on_mission: Callable[[list[MissionItem], int], None],
                  on_fence: Callable[[list[MissionItem]], None], current_seq: Callable[[], int],
-                 set_current: Callable[[int], None], text: Callable[[str, int], None]):
-        self.stored: dict[int, list[MissionItem]] = {MISSION: [], FENCE: []}
+                 set_current: Callable[[int], None], text: Callable[[str, int], None],
+                 on_rally: Callable[[list[MissionItem]], None] = lambda items: None):
+        self.stored: dict[int, list[MissionItem]] = {MISSION: [], FENCE: [], RALLY: []}
         self.int_mode = True  # PX4 main; v1.14 started in float mode (docs/sitl.md)
         self.transfer: _Transfer | None = None
         self._last_upload: tuple[tuple[int, int], int, int] | None = None  # (client, type, count) of the last ACK
-        self._on_mission, self._on_fence = on_mission, on_fence
+        self._on_stored: dict[int, Callable[[list[MissionItem], int], None]] = {
+            MISSION: on_mission, FENCE: lambda items, current: on_fence(items),
+            RALLY: lambda items, current: on_rally(items)}
         self._current_seq, self._set_current, self._text = current_seq, set_current, text
 
     @property
@@ -137,6 +154,11 @@ class MissionTransfer:
         """The stored fence items."""
         return self.stored[FENCE]
 
+    @property
+    def rally(self) -> list[MissionItem]:
+        """The stored rally points (PX4's safe points)."""
+        return self.stored[RALLY]
+
     # ------------------------------------------------------------------ upload
     def on_count(self, endpoint: Endpoint, msg: mavlink.MAVLink_message, now: float) -> None:
         partner, kind = (msg.get_srcSystem(), msg.get_srcComponent()), msg.mission_type
@@ -145,14 +167,13 @@ class MissionTransfer:
             if busy.direction == "receiving" and busy.partner == partner and busy.next_seq == 0:
                 self._request(busy, now)  # our first request was lost: ask again
             else:
-                self._text("WPM: REJ. CMD: Busy\t" if busy.direction == "receiving" else "WPM: IGN MISSION_COUNT: Busy\t",
+                receiving = busy.direction == "receiving"
+                self._text("WPM: REJ. CMD: Busy\t" if receiving else "WPM: IGN MISSION_COUNT: Busy\t",
                            mavlink.MAV_SEVERITY_CRITICAL)
                 self._ack(endpoint, partner, mavlink.MAV_MISSION_ERROR, kind)
             return
         if kind not in CAPACITY:
-            result = mavlink.MAV_MISSION_UNSUPPORTED if kind == mavlink.MAV_MISSION_TYPE_RALLY else \
-                mavlink.MAV_MISSION_INVALID
-            self._ack(endpoint, partner, result, kind)
+            self._ack(endpoint, partner, mavlink.MAV_MISSION_INVALID, kind)
             return
         if msg.count > CAPACITY[kind]:
             self._ack(endpoint, partner, mavlink.MAV_MISSION_NO_SPACE, kind)
@@ -205,10 +226,7 @@ class MissionTransfer:
 
     def _store(self, kind: int, items: list[MissionItem], current_seq: int) -> None:
         self.stored[kind], self._last_upload = list(items), None
-        if kind == MISSION:
-            self._on_mission(self.items, current_seq)
-        else:
-            self._on_fence(self.fence)
+        self._on_stored[kind](self.stored[kind], current_seq)
 
     def _abort(self, result: int) -> None:
         t = self.transfer
