@@ -21,6 +21,8 @@ class WallClock:
         self.tick_s = tick_s
         self._start = time.monotonic()
         self._next = self._start
+        self.started_unix_us = time.time_ns() // 1000
+        """The moment ``now()`` counts from, in microseconds since the Unix epoch (what a flight's tlog stamps)."""
 
     def now(self) -> float:
         return time.monotonic() - self._start

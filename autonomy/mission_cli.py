@@ -119,7 +119,7 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
             link = MavsdkLink(args.connect, clock.now)
         else:
             connection = open_connection(args.connect)
-            tlog = TlogRecorder(out / TLOG)
+            tlog = TlogRecorder(out / TLOG, clock.started_unix_us)  # dated: mavtogpx and log viewers need it
             # A security warning is printed even with --quiet.
             link = VehicleLink(connection, clock.now, tlog, signing_key=args.key, signing_timestamp=wall_timestamp,
                                warn=print)

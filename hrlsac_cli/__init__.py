@@ -37,7 +37,7 @@ GROUPS: dict[str, dict[str, tuple[str, str]]] = {
 
 USAGE = "usage: hrlsac [-h] [--version] COMMAND [ARGS...]"
 TRAIN_EXTRA_MODULES = {"gymnasium": "gymnasium", "cv2": "opencv-python-headless", "matplotlib": "matplotlib",
-                       "tensorboard": "tensorboard"}
+                       "tensorboard": "tensorboard", "tqdm": "tqdm", "scipy": "scipy"}
 """Modules of the "train" extra, which an on-board install (``pip install hrlsac``) leaves out."""
 TRACEBACK_ENV = "HRLSAC_TRACEBACK"
 """Set to 1 to see the Python traceback of an unexpected error instead of its one-line summary."""

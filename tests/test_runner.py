@@ -20,7 +20,7 @@ import subprocess
 import sys
 import textwrap
 import time
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -377,6 +377,7 @@ def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str
 @pytest.mark.slow
 @pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
 def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path, autopilot):
+    started = time.time()
     _, _, report = fly_against_sitl_process(policy, tmp_path, autopilot=autopilot)
     assert [t["to"] for t in report["transitions"]] == ALL_STATES
     assert report["autopilot"] == {"px4": "PX4", "ardupilot": "ArduPilot Copter"}[autopilot]
@@ -384,8 +385,11 @@ def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_pa
     # The vehicle's clock is 600 s plus the head start ahead of the runner's: one time base all the same.
     assert report["vehicle_time"]["offset_s"] < -600.0 - VEHICLE_UP_FIRST_S + 1.0
     assert report["vehicle_time"]["timeline_changes"] == 0 and report["estimator"]["reinitialisations"] == 0
-    setpoints = ours(read_tlog(tmp_path / "out" / "flight.tlog"), "SET_POSITION_TARGET_LOCAL_NED")
+    messages = read_tlog(tmp_path / "out" / "flight.tlog", datetime.fromtimestamp(0, timezone.utc))
+    setpoints = ours(messages, "SET_POSITION_TARGET_LOCAL_NED")
     assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
+    # A real flight's tlog is stamped with the wall clock (mavtogpx and log viewers date its points by it).
+    assert started - 1.0 < messages[0]._timestamp < messages[-1]._timestamp < time.time()
 
 
 @pytest.mark.slow
