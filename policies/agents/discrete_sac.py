@@ -29,26 +29,16 @@ import torch.nn.functional as F
 
 from policies.agents.adam import adam_step, zero_grads
 from policies.agents.networks import CategoricalActor, TwinQDiscrete
-from policies.agents.off_policy import OffPolicyAgent
+from policies.agents.off_policy import OffPolicyAgent, OffPolicyConfig
 from policies.agents.replay_batch import ReplayBatch
-from policies.config import NetworkConfig, TrainConfig
+from policies.config import TrainConfig
 
 
 @dataclass(frozen=True)
-class DiscreteSacConfig:
-    """The settings of one discrete SAC; :meth:`from_train_config` takes them from a run's ``TrainConfig``, which
-    holds their defaults and checks their ranges."""
+class DiscreteSacConfig(OffPolicyConfig):
+    """The settings of one discrete SAC: the actor maps the observation to one logit per action, each critic the
+    observation and the action's one-hot to Q; an ``initial_alpha`` below ``min_alpha`` starts at the floor."""
 
-    actor: NetworkConfig
-    """The actor's hidden layers (observation -> hidden -> one logit per action)."""
-    critic: NetworkConfig
-    """Each critic's hidden layers (observation and the action's one-hot -> hidden -> Q)."""
-    learning_rate: float
-    """Adam's learning rate of the actor, the critics and the temperature."""
-    tau: float
-    """Polyak rate of the target critics."""
-    initial_alpha: float
-    """The temperature before the first update (raised to ``min_alpha`` if below)."""
     target_entropy_scale: float
     """The entropy target as a share of the largest entropy, log(n_actions): high enough that the policy keeps
     every action in use."""

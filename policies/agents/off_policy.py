@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -23,22 +24,40 @@ import torch
 from policies.agents.adam import fused_adam
 from policies.agents.replay_batch import ReplayBatch
 from policies.agents.shared import PrivateTorchRNG, as_float_tensor, derive_seeds, polyak_update
+from policies.config import NetworkConfig
 
 METRIC_NAMES = ("critic_loss", "actor_loss", "alpha", "alpha_loss", "entropy", "q_mean")
 """The metrics every ``update`` returns, in this order."""
+
+
+@dataclass(frozen=True)
+class OffPolicyConfig:
+    """The settings every agent here has; each agent's config adds its own. Built from a run's ``TrainConfig``
+    (``from_train_config``), which holds their defaults and checks their ranges."""
+
+    actor: NetworkConfig
+    """The actor's hidden layers."""
+    critic: NetworkConfig
+    """Each of the twin critics' hidden layers."""
+    learning_rate: float
+    """Adam's learning rate of the actor, the critics and the temperature."""
+    tau: float
+    """Polyak rate of the target critics."""
+    initial_alpha: float
+    """The temperature before the first update."""
 
 
 class OffPolicyAgent:
     """An actor, twin critics with target copies, a learned temperature, their optimisers and random streams.
 
     A subclass sets what :meth:`_build_networks` needs before calling ``__init__``, builds its networks there,
-    and implements ``act`` and ``update``. ``config`` must have ``learning_rate``, ``tau`` and ``initial_alpha``.
+    and implements ``act`` and ``update``.
     """
 
     _MODULES = ("actor", "critic", "critic_target", "actor_optim", "critic_optim", "alpha_optim")
     """The parts with a ``state_dict`` of their own, in checkpoint order."""
 
-    def __init__(self, obs_dim: int, config, seed: int, input_mask: np.ndarray | None):
+    def __init__(self, obs_dim: int, config: OffPolicyConfig, seed: int, input_mask: np.ndarray | None):
         self.config = config
         self.obs_dim = int(obs_dim)
         self.tau = float(config.tau)

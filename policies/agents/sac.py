@@ -34,33 +34,23 @@ import torch
 from policies.agents.action_scaler import ActionScaler
 from policies.agents.adam import adam_step, zero_grads
 from policies.agents.networks import SquashedGaussianActor, TwinQ, UpdateWeights
-from policies.agents.off_policy import OffPolicyAgent
+from policies.agents.off_policy import OffPolicyAgent, OffPolicyConfig
 from policies.agents.replay_batch import ReplayBatch
 from policies.agents.shared import as_float_tensor
-from policies.config import NetworkConfig, TrainConfig
+from policies.config import TrainConfig
 
 
 @dataclass(frozen=True)
-class SacConfig:
-    """The settings of one continuous SAC; :meth:`from_train_config` takes them from a run's ``TrainConfig``, which
-    holds their defaults and checks their ranges."""
+class SacConfig(OffPolicyConfig):
+    """The settings of one continuous SAC: the actor maps the observation to the mean and log standard deviation of
+    each action, each critic the observation and the action to Q."""
 
-    actor: NetworkConfig
-    """The actor's hidden layers (observation -> hidden -> mean and log std of each action)."""
-    critic: NetworkConfig
-    """Each critic's hidden layers (observation and action -> hidden -> Q)."""
-    learning_rate: float
-    """Adam's learning rate of the actor, the critics and the temperature."""
     gamma: float
     """Discount of transitions that carry no discount of their own (one-step transitions)."""
-    tau: float
-    """Polyak rate of the target critics."""
     log_std_bounds: tuple[float, float]
     """Clip of the actor's log standard deviation (keeps the policy's spread finite and non-zero)."""
     target_entropy: float | None
     """The entropy the temperature steers the policy towards; None: -act_dim (Haarnoja et al.'s heuristic)."""
-    initial_alpha: float
-    """The temperature before the first update."""
     action_margin: float
     """Widening of the actor's range beyond the environment's, as a share of each range on each side
     (:class:`policies.agents.action_scaler.ActionScaler`); 0: tanh maps exactly onto the range."""
