@@ -6,6 +6,7 @@ eval_test.json made by the evaluation's own ``summarise``); the scripted baselin
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import subprocess
@@ -176,12 +177,25 @@ def test_cli_writes_the_report_and_prints_progress(runs, tmp_path):
     result = subprocess.run([sys.executable, "-m", "hrlsac_cli", "compare", *paths, "--out", str(tmp_path / "cli"),
                              "--episodes", str(EPISODES)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
-    progress = result.stderr.strip().splitlines()
+    progress = result.stderr.strip().splitlines()  # not a terminal, and shorter than a progress line's interval
     assert len(progress) == 3 + 3 and progress[0].startswith("[run 1/3]") and progress[-1].startswith("[baseline 3/3]")
     assert "written" in result.stdout
     report = (tmp_path / "cli" / "report.md").read_text()
     assert f"hrlsac compare {paths[0]} {paths[1]} {paths[2]} --out {tmp_path / 'cli'} --episodes {EPISODES}" in report
     assert cv2.imread(str(tmp_path / "cli" / "boxplots.png")) is not None
+
+
+def test_the_progress_bar_counts_the_episodes_to_fly(runs, tmp_path, monkeypatch):
+    from policies.reports import progress
+
+    monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)  # not a terminal: a line at every update, from the first
+    stream = io.StringIO()
+    compare([str(runs[("sac", 0)][0])], tmp_path / "out", episodes=EPISODES, progress=stream)
+    lines = stream.getvalue().splitlines()
+    done = [line for line in lines if line.startswith("[")]  # and the bar's lines
+    assert done[0].startswith("[run 1/1]") and sum(line.startswith("[baseline ") for line in done) == 3
+    # the run has its evaluation: the episodes to fly are the three SarSearch-v0 baselines'
+    assert "100%|" in lines[-1] and f" {3 * EPISODES}/{3 * EPISODES} [" in lines[-1] and "episode/s" in lines[-1]
 
 
 def _one_line_error(capsys, argv) -> str:

@@ -175,12 +175,18 @@ def test_progress_table_redraws_in_place_on_a_terminal_and_prints_state_changes_
     table = ProgressTable(live, live=True)
     table.update(rows)
     table.update(rows)
-    assert live.getvalue().count(f"\x1b[{len(lines)}F\x1b[J") == 1
+    assert live.getvalue().count(f"\x1b[{len(lines) + 1}F\x1b[J") == 1  # the table and the sweep's progress line
+    assert live.getvalue().splitlines()[-1].startswith("sweep:  75%|") and "1200/1600 [" in live.getvalue()
     plain = io.StringIO()
     table = ProgressTable(plain, live=False)
     table.update(rows)
     table.update(rows)  # nothing changed: nothing printed
     assert len(plain.getvalue().splitlines()) == 2 and "\x1b" not in plain.getvalue()
+    table.finish(rows)  # the whole table, then the progress line with its rate and time left
+    assert plain.getvalue().splitlines()[-2:] == [lines[-1], table.meter(rows)] and "step/s" in table.meter(rows)
+    quiet = io.StringIO()
+    ProgressTable(quiet, live=False, enabled=False).finish(rows)
+    assert quiet.getvalue() == ""
 
 
 # ---------------------------------------------------------------------------------------------- sweeps
@@ -273,9 +279,12 @@ def test_parallel_evaluation_equals_serial_on_processes_and_ray(sweep_runs, algo
     serial = evaluate_checkpoint(run, "val", 11)
     assert serial["episodes"] == 11 and len(serial["per_episode"]["reward"]) == 11
     progress = []
-    on_processes = evaluate_checkpoint(run, "val", 11, PoolConfig(workers=2), lambda *done: progress.append(done))
-    assert sorted(progress) == [(1, 2), (2, 2)]
+    on_processes = evaluate_checkpoint(run, "val", 11, PoolConfig(workers=2), progress.append)
+    assert progress in ([6, 11], [5, 11])  # the episodes flown, as each chunk (6 and 5 episodes) comes back
     assert on_processes == serial
+    in_process = []  # one chunk, flown here: after every step, the episodes that have ended
+    assert evaluate_checkpoint(run, "val", 11, on_progress=in_process.append) == serial
+    assert in_process[-1] == 11 and in_process == sorted(in_process) and len(in_process) > 2
     # 4 chunks of 3, 3, 3 and 2 episodes (small batches are where torch's kernels would differ) on Ray.
     assert evaluate_checkpoint(run, "val", 11, PoolConfig(workers=4, ray_address="local")) == serial
 

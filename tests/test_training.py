@@ -42,6 +42,34 @@ def log_rows(path) -> list[dict]:
         return [{k: v for k, v in row.items() if k != "steps_per_s"} for row in csv.DictReader(handle)]
 
 
+def test_progress_bars_show_rate_and_time_left_on_stderr_and_change_nothing_else(tmp_path, capsys, monkeypatch):
+    from policies.cli import evaluate as evaluate_command
+    from policies.reports import progress
+
+    monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)  # not a terminal: a line at every update, from the first
+    config = small_config("sac", total_steps=400)
+    runs = {}
+    for name, quiet in (("quiet", True), ("shown", False)):
+        runs[name] = Trainer(config, tmp_path / name)
+        runs[name].run(progress=not quiet)
+        argv = [str(tmp_path / name), "--split", "val", "--episodes", "4", "--out", str(tmp_path / f"{name}.json")]
+        assert evaluate_command.main(argv + (["--quiet"] if quiet else [])) == 0
+        runs[name].stderr = capsys.readouterr().err.splitlines()
+    assert runs["quiet"].stderr == []
+    training = [line for line in runs["shown"].stderr if line.startswith("training:")]
+    assert training[-1].startswith("training: 100%") and " 400/400 [" in training[-1]
+    assert "step/s" in training[-1] and "<00:00" in training[-1] and "episodes " in training[-1]
+    evaluating = [line for line in runs["shown"].stderr if line.startswith("evaluating:")]
+    assert len(evaluating) > 2 and evaluating[-1].startswith("evaluating: 100%")  # step by step, in this process
+    assert " 4/4 [" in evaluating[-1] and "episode/s" in evaluating[-1]
+    assert log_rows(tmp_path / "quiet" / "progress.csv") == log_rows(tmp_path / "shown" / "progress.csv")
+    for a, b in zip(runs["quiet"].low.actor.state_dict().values(), runs["shown"].low.actor.state_dict().values()):
+        assert torch.equal(a, b)
+    metrics = [json.loads((tmp_path / f"{name}.json").read_text()) for name in ("quiet", "shown")]
+    assert [{k: v for k, v in m.items() if k != "checkpoint"} for m in metrics][0] == \
+        {k: v for k, v in metrics[1].items() if k != "checkpoint"}
+
+
 @pytest.mark.parametrize("algo", ["sac", "hrl-sac"])
 def test_resuming_after_a_kill_continues_exactly(tmp_path, algo):
     config = small_config(algo)

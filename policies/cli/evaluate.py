@@ -36,22 +36,25 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
                              "the search (RTL) and so does the pilot's bingo failsafe (what a real flight does)")
     parser.add_argument("--out", default=None,
                         help="metrics file (default: RUN/eval_SPLIT[_NAME][_flight][_goal-GOAL].json)")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     add_pool_arguments(parser)
     args = parser.parse_args(argv)
     if args.episodes is not None and args.episodes < 1:
         print(f"{prog}: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
         return 2
     from policies.evaluation.parallel import evaluate_checkpoint
+    from policies.reports.progress import progress_bar
 
     try:
         environment, name, count = user_scenarios(args.missions, args.generator, args.run)
         episodes = args.episodes or count or 100
         goal = goal_index(args.constant_goal)
         pool = pool_from_arguments(args)
-        if pool.workers > 1 or pool.uses_ray:
+        if (pool.workers > 1 or pool.uses_ray) and not args.quiet:
             print(f"evaluating {episodes} episodes on {pool.describe()}", file=sys.stderr, flush=True)
-        metrics = evaluate_checkpoint(args.run, args.split, episodes, pool, _chunk_done, environment, goal,
-                                      flight_rules=args.flight_rules)
+        with progress_bar(episodes, "episode", "evaluating", enabled=not args.quiet) as bar:
+            metrics = evaluate_checkpoint(args.run, args.split, episodes, pool, bar.advance_to, environment, goal,
+                                          flight_rules=args.flight_rules)
     except (FileNotFoundError, ValueError, KeyError, WorkerPoolError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
@@ -150,8 +153,3 @@ def _check_flight(loaded: list, files: list[Path], run: str) -> None:
         if mission.flight != flight:
             raise ValueError(f"{file}: its flight settings differ from the policy's training flight settings "
                              f"({dataclasses.asdict(flight)})")
-
-
-def _chunk_done(done: int, chunks: int) -> None:
-    if chunks > 1:
-        print(f"  {done}/{chunks} chunks of episodes done", file=sys.stderr, flush=True)

@@ -24,11 +24,13 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                         help="runs trained at once (default: the sweep file's max_parallel, else one per Ray CPU)")
     parser.add_argument("--out", default=None, help="sweep folder (overrides the file's 'out')")
     parser.add_argument("--dry-run", action="store_true", help="list the runs and their folders, train nothing")
+    parser.add_argument("--quiet", action="store_true", help="no progress table")
     return parser
 
 
 def main(argv: list[str], prog: str = "hrlsac sweep") -> int:
     args = build_parser(prog).parse_args(argv)
+    from policies.reports.sweep_table import ProgressTable
     from policies.training.sweep import check_run_folders, pending_runs, run_sweep
     from policies.training.sweep_config import load_sweep
 
@@ -46,7 +48,7 @@ def main(argv: list[str], prog: str = "hrlsac sweep") -> int:
             print(f"  {spec.name}  ({spec.config.total_steps:,} steps)")
         return 0
     try:
-        statuses = run_sweep(sweep, args.ray, args.max_parallel)
+        statuses = run_sweep(sweep, args.ray, args.max_parallel, ProgressTable(enabled=not args.quiet))
     except (WorkerPoolError, ValueError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2

@@ -27,8 +27,8 @@ FOUND_BY_S = (120, 240, 360, 480, 600, 720)
 GoalFn = Callable[[np.ndarray], np.ndarray]
 
 
-def run_episodes(core: FlownSearch, act: ActFn, choose_goals: GoalFn | None = None,
-                 flight_rules: bool = False) -> dict[str, np.ndarray]:
+def run_episodes(core: FlownSearch, act: ActFn, choose_goals: GoalFn | None = None, flight_rules: bool = False,
+                 on_progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """Fly every slot of ``core`` to the end of its current episode; per-episode outcome arrays.
 
     ``act(core)`` returns (N, 4) actions; ``choose_goals(meta_obs)`` (HRL) returns goal indices for the rows it
@@ -37,7 +37,7 @@ def run_episodes(core: FlownSearch, act: ActFn, choose_goals: GoalFn | None = No
     v0 always: the vehicle is sent home with RTL; in training ReturnToBase is a sub-goal like the others, flown by
     the low level until the next decision), and so does the pilot's bingo failsafe (SarSearch-v1,
     ``autonomy.search_pilot.BINGO_FAILSAFE_S``); used to compare flight with the environment on equal terms
-    (benchmarks/sim_to_sitl.py).
+    (benchmarks/sim_to_sitl.py). ``on_progress(episodes_done)`` is called after every step.
     """
     n, k = core.n, core.flight.subgoal_interval
     done = np.zeros(n, dtype=bool)
@@ -86,6 +86,8 @@ def run_episodes(core: FlownSearch, act: ActFn, choose_goals: GoalFn | None = No
             segments += ended
             reached_segments += ended & reached
         done |= ended
+        if on_progress is not None:
+            on_progress(int(done.sum()))
     record["subgoal_segments"], record["subgoals_reached"] = segments, reached_segments
     return record
 
@@ -117,7 +119,8 @@ def summarise(record: dict[str, np.ndarray], step_period_s: float = 1.0) -> dict
         "reward_mean": float(record["episode_return"].mean()), "reward_std": float(record["episode_return"].std()),
         "coverage_mean": float(record["coverage"].mean()), "coverage_std": float(record["coverage"].std()),
         "length_mean": float(record["length"].mean()), "length_std": float(record["length"].std()),
-        "collision_rate": float(record["collision"].mean()), "out_of_bounds_rate": float(record["out_of_bounds"].mean()),
+        "collision_rate": float(record["collision"].mean()),
+        "out_of_bounds_rate": float(record["out_of_bounds"].mean()),
         "ran_dry_rate": float(record["ran_dry"].mean()), "returned_rate": float(record["returned"].mean()),
         "found_by": found_by(record["success"], record["length"] * step_period_s),
         "subgoal_reachability": (float(record["subgoals_reached"].sum()) / segments) if segments else None,

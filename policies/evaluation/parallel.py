@@ -17,6 +17,7 @@ Workers also compute with one torch thread each (:mod:`simulation.worker_pool`),
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -67,25 +68,27 @@ def padded(fn: Callable[[np.ndarray], np.ndarray], rows: int = MIN_POLICY_ROWS) 
     return call
 
 
-def fly_chunk(chunk: EpisodeChunk) -> dict[str, np.ndarray]:
-    """The per-episode outcome arrays of one chunk (runs in a worker, or in this process)."""
+def fly_chunk(chunk: EpisodeChunk, on_progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """The per-episode outcome arrays of one chunk (runs in a worker, or in this process, where ``on_progress`` may
+    follow its episodes: ``run_episodes``)."""
     policy = CheckpointPolicy.from_state(chunk.policy_state, Path(chunk.checkpoint))
     return fly_policy(policy, episode_batch(chunk.split, chunk.episodes, policy.config.flight,
                                             goal_conditioned=policy.hierarchical, slots=chunk.slots,
                                             task=policy.config.task, action_frame=policy.config.action_frame,
-                                            **chunk.environment), chunk.constant_goal, chunk.flight_rules)
+                                            **chunk.environment), chunk.constant_goal, chunk.flight_rules, on_progress)
 
 
-def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None,
-               flight_rules: bool = False) -> dict[str, np.ndarray]:
+def fly_policy(policy: CheckpointPolicy, core, constant_goal: int | None = None, flight_rules: bool = False,
+               on_progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """The per-episode outcome arrays of ``policy`` (deterministic, padded calls) flying every slot of ``core``;
     ``constant_goal``: that goal at every decision instead of the meta-controller's; ``flight_rules``: the mission
     runner's rules instead of training's."""
     act = padded(policy.act)
     choose = padded(policy.choose_goals) if policy.hierarchical else None
     if constant_goal is not None:
-        choose = lambda meta_obs: np.full(len(meta_obs), constant_goal)  # noqa: E731
-    return run_episodes(core, lambda batch: act(batch.obs), choose, flight_rules=flight_rules)
+        def choose(meta_obs: np.ndarray) -> np.ndarray:
+            return np.full(len(meta_obs), constant_goal)
+    return run_episodes(core, lambda batch: act(batch.obs), choose, flight_rules, on_progress)
 
 
 def quick_evaluation(policy: CheckpointPolicy) -> dict[str, float]:
@@ -93,9 +96,9 @@ def quick_evaluation(policy: CheckpointPolicy) -> dict[str, float]:
     dry of the deterministic policy on the first ``eval_episodes`` val scenarios, in this process, with its own
     environments; with ``TrainConfig.eval_flight_rules``, flown with the mission runner's rules."""
     cfg = policy.config
-    record = fly_policy(policy, episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=policy.hierarchical,
-                                              task=cfg.task, action_frame=cfg.action_frame),
-                        flight_rules=cfg.eval_flight_rules)
+    core = episode_batch("val", cfg.eval_episodes, cfg.flight, goal_conditioned=policy.hierarchical, task=cfg.task,
+                         action_frame=cfg.action_frame)
+    record = fly_policy(policy, core, flight_rules=cfg.eval_flight_rules)
     return {"success_rate": float(record["success"].mean()), "ran_dry_rate": float(record["ran_dry"].mean())}
 
 
@@ -105,11 +108,12 @@ def merge_records(records: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]
 
 
 def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None = None,
-                       on_done: Callable[[int, int], None] | None = None, environment: dict | None = None,
+                       on_progress: Callable[[int], None] | None = None, environment: dict | None = None,
                        constant_goal: int | None = None, flight_rules: bool = False) -> dict:
     """The paper's metrics of the checkpoint at ``path`` (file or run folder) on the first ``episodes``
     scenarios of ``split`` (or of ``environment``'s: ``generator`` / ``scenarios``), flown on ``pool`` (default: in
-    this process). ``on_done(chunks_done, chunks)`` reports progress; ``constant_goal``: see :class:`EpisodeChunk`."""
+    this process). ``on_progress(episodes_done)`` follows the episodes: as each chunk is flown, and step by step
+    when the only chunk flies in this process; ``constant_goal``: see :class:`EpisodeChunk`."""
     pool = pool or PoolConfig()
     path = checkpoint_file(path)
     state = load_checkpoint_state(path, path)  # a damaged or wrong file is one ValueError naming it
@@ -121,16 +125,24 @@ def evaluate_in_chunks(path, split: str, episodes: int, pool: PoolConfig | None 
     chunks = [EpisodeChunk(policy_state, str(path), split, episodes, slots, environment=dict(environment or {}),
                            constant_goal=constant_goal, flight_rules=flight_rules)
               for slots in contiguous_chunks(episodes, pool.workers)]
-    finished = []
-    progress = None if on_done is None else (lambda index, _: (finished.append(index), on_done(len(finished), len(chunks))))
-    record = merge_records(run_tasks(fly_chunk, chunks, pool, progress))
+    fly, chunk_done = fly_chunk, None
+    if on_progress is not None:
+        flown = []
+
+        def chunk_done(index: int, _) -> None:
+            flown.append(len(chunks[index].slots))
+            on_progress(sum(flown))
+
+        if len(chunks) == 1 and not pool.uses_ray:  # flown in this process (run_tasks): it can report every step
+            fly = functools.partial(fly_chunk, on_progress=on_progress)
+    record = merge_records(run_tasks(fly, chunks, pool, chunk_done))
     return {"algo": config.algo, "preset": config.preset, "seed": config.seed, "checkpoint": str(path),
             "trained_steps": int(policy_state["step"]), "split": split, "task": config.task,
             "max_steps": config.flight.max_steps, "constant_goal": constant_goal, "flight_rules": flight_rules,
             **summarise(record, config.flight.step_period_s)}
 
 
-def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_done=None,
+def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=None, on_progress=None,
                         environment: dict | None = None, constant_goal: int | None = None,
                         flight_rules: bool = False) -> dict:
     """The paper's metrics of a trained run's deterministic policy on ``split`` (or on ``environment``'s scenarios:
@@ -138,4 +150,4 @@ def evaluate_checkpoint(path, split: str = "test", episodes: int = 100, pool=Non
     the episodes are split across workers, with identical results. ``constant_goal``: HRL-SAC's learned low level
     flying that goal at every decision; ``flight_rules``: the mission runner's rules (ReturnToBase and the pilot's
     bingo failsafe end the search) instead of training's."""
-    return evaluate_in_chunks(path, split, episodes, pool, on_done, environment, constant_goal, flight_rules)
+    return evaluate_in_chunks(path, split, episodes, pool, on_progress, environment, constant_goal, flight_rules)

@@ -28,6 +28,7 @@ from policies.evaluation.stats import (  # noqa: F401
     t_quantile_975,
     wilson_interval,
 )
+from policies.reports.progress import progress_bar
 from policies.reports.runs import (  # noqa: F401  (re-exported: the comparison's data model)
     ALGO_LABELS,
     BASELINE_LABELS,
@@ -56,11 +57,6 @@ def _write_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _say(stream: TextIO | None, text: str, end: str = "\n") -> None:
-    if stream is not None:
-        print(text, end=end, file=stream, flush=True)
-
-
 def compare(runs: list, out, split: str = "test", episodes: int | None = None, evaluate: bool = False,
             command: str | None = None, progress: TextIO | bool | None = True, streams: int = 5,
             generator=None, scenarios: str | None = None, scripted: list[str] | None = None) -> dict:
@@ -68,8 +64,9 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
 
     Missing (or differently sized) evaluations are computed with ``evaluate=True`` and saved as
     ``RUN/eval_<split>.json``; without it they are a :class:`CompareError`. ``episodes`` None takes the count of
-    the runs' evaluation files (100 when there are none). ``progress``: True prints one line per run and baseline
-    to stderr, a stream prints there, None/False is silent. ``command`` is the command line recorded in the report
+    the runs' evaluation files (100 when there are none). ``progress``: True shows a progress bar of the episodes
+    to fly (``policies.reports.progress``) and a line per run and scripted searcher on stderr, a stream shows them
+    there, None/False is silent. ``command`` is the command line recorded in the report
     (default: reconstructed). Returns the summary written to ``out/summary.json`` plus the paths of the files.
     SarSearch-v1 runs also get the rows of ``policies.reports.groups`` (scripted searchers over ``streams``
     detection streams, constant goals, IQM, P(found by t)); ``generator`` (a GeneratorConfig) with ``scenarios``
@@ -77,6 +74,7 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     ``scripted`` names the scripted searchers to fly (default: all of ``policies.env.baselines_v1.BASELINES``).
     """
     from policies.env.baselines_v0 import BASELINES_V0
+    from policies.env.baselines_v1 import BASELINES
     from policies.reports import groups as compare_groups
 
     progress = sys.stderr if progress is True else (progress or None)
@@ -90,29 +88,32 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise CompareError(f"--out {out}: exists and is not a folder")
-    for i, run in enumerate(loaded, 1):
-        what = (f"[run {i}/{len(loaded)}] {run.path}: {run.config['algo']} ({run.config['preset']}) "
-                f"seed {run.config['seed']}")
-        run.eval_command = shlex.join(["hrlsac", "evaluate", str(run.path), "--split", split,
-                                       "--episodes", str(episodes)])
-        if run.metrics is not None and int(run.metrics["episodes"]) == episodes:
-            eval_file = f"eval_{split}{f'_{scenarios}' if scenarios else ''}.json"
-            _say(progress, f"{what}: {eval_file}, success {run.metrics['success_rate']:.1%}")
-            continue
-        _say(progress, f"{what}: evaluating on {split} ({episodes} episodes) ... ", end="")
-        started = time.perf_counter()
-        run.metrics = _evaluate(run, split, episodes)
-        _say(progress, f"success {run.metrics['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
-    baselines, scripted_rows = {}, None
-    environment = {"generator": generator} if generator is not None else {}
-    if task == "SarSearch-v1":
-        scripted_rows, baselines = compare_groups.scripted_rows(task, split, episodes, flight, streams, environment,
-                                                                progress, scripted)
-    for i, name in enumerate(BASELINES_V0 if task == "SarSearch-v0" else (), 1):
-        _say(progress, f"[baseline {i}/{len(BASELINES_V0)}] {name} on {split} ({episodes} episodes) ... ", end="")
-        started = time.perf_counter()
-        baselines[name] = _run_baseline(name, split, episodes, flight)
-        _say(progress, f"success {baselines[name]['success_rate']:.1%} ({time.perf_counter() - started:.1f} s)")
+    to_evaluate = [run for run in loaded if run.metrics is None or int(run.metrics["episodes"]) != episodes]
+    flown = (len(to_evaluate) + (len(scripted or BASELINES) * streams if task == "SarSearch-v1" else
+                                 len(BASELINES_V0))) * episodes
+    with progress_bar(flown, "episode", "comparing", enabled=progress is not None, stream=progress) as bar:
+        for i, run in enumerate(loaded, 1):
+            what = (f"[run {i}/{len(loaded)}] {run.path}: {run.config['algo']} ({run.config['preset']}) "
+                    f"seed {run.config['seed']}")
+            run.eval_command = shlex.join(["hrlsac", "evaluate", str(run.path), "--split", split,
+                                           "--episodes", str(episodes)])
+            if run not in to_evaluate:
+                eval_file = f"eval_{split}{f'_{scenarios}' if scenarios else ''}.json"
+                bar.note(f"{what}: {eval_file}, success {run.metrics['success_rate']:.1%}")
+                continue
+            bar.set_description(f"evaluating run {i}/{len(loaded)}", refresh=False)
+            run.metrics = _evaluate(run, split, episodes, bar.follow())
+            bar.note(f"{what}: evaluated on {split} ({episodes} episodes), success {run.metrics['success_rate']:.1%}")
+        baselines, scripted_rows = {}, None
+        environment = {"generator": generator} if generator is not None else {}
+        if task == "SarSearch-v1":
+            scripted_rows, baselines = compare_groups.scripted_rows(task, split, episodes, flight, streams,
+                                                                    environment, bar, scripted)
+        for i, name in enumerate(BASELINES_V0 if task == "SarSearch-v0" else (), 1):
+            bar.set_description(name, refresh=False)
+            baselines[name] = _run_baseline(name, split, episodes, flight, bar.follow())
+            bar.note(f"[baseline {i}/{len(BASELINES_V0)}] {name} on {split} ({episodes} episodes): success "
+                      f"{baselines[name]['success_rate']:.1%}")
 
     groups: dict[tuple[str, str], list[Run]] = {}
     for run in sorted(loaded, key=lambda r: (list(ALGO_LABELS).index(r.key[0]), r.key[1], r.config["seed"])):
@@ -160,21 +161,21 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     return summary
 
 
-def _evaluate(run: Run, split: str, episodes: int) -> dict:
+def _evaluate(run: Run, split: str, episodes: int, on_progress) -> dict:
     from policies.evaluation.parallel import evaluate_checkpoint
 
     try:
-        metrics = evaluate_checkpoint(run.path, split, episodes)
+        metrics = evaluate_checkpoint(run.path, split, episodes, on_progress=on_progress)
     except (FileNotFoundError, ValueError, KeyError, RuntimeError) as exc:
         raise CompareError(f"{run.path}: cannot evaluate ({_one_line(exc)})") from None
     _write_atomic(run.path / f"eval_{split}.json", json.dumps(metrics, indent=2))
     return metrics
 
 
-def _run_baseline(name: str, split: str, episodes: int, flight) -> dict:
+def _run_baseline(name: str, split: str, episodes: int, flight, on_progress) -> dict:
     from policies.evaluation.baselines import run_baseline
 
-    return run_baseline(name, split, episodes, flight)
+    return run_baseline(name, split, episodes, flight, on_progress=on_progress)
 
 
 def verdicts(groups: list[dict]) -> list[dict]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Sequence
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from policies.evaluation.aggregate import STRATA, aggregate, strata_of
 from policies.evaluation.episodes import FOUND_BY_S, episode_batch
 from policies.evaluation.stats import group_stats, intervals_overlap
 from policies.reports.figures import colour, new_figure, save_figure
+from policies.reports.progress import ProgressBar
 from policies.reports.runs import CompareError, Run
 
 SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bounded, repeated)",
@@ -30,10 +31,10 @@ SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bo
                    "lookahead_bayes": "Greedy Bayesian with lookahead"}
 
 
-def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, environment: dict,
-                  progress: TextIO | None, names: Sequence[str] | None = None) -> tuple[list[dict], dict[str, dict]]:
+def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, environment: dict, bar: ProgressBar,
+                  names: Sequence[str] | None = None) -> tuple[list[dict], dict[str, dict]]:
     """Each scripted searcher's row (``names``, default all) over ``streams`` detection streams, and its first
-    stream's metrics (figures)."""
+    stream's metrics (figures); ``bar`` (``policies.reports.progress``) follows their episodes."""
     from policies.env.baselines_v1 import BASELINES
     from policies.evaluation.baselines import run_baseline
 
@@ -41,9 +42,10 @@ def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, en
     for name in names or BASELINES:
         runs = []
         for stream in range(streams):
-            if progress is not None:
-                print(f"[scripted] {name}, stream {stream + 1}/{streams} ...", file=progress, flush=True)
-            runs.append(run_baseline(name, split, episodes, flight, task=task, stream=stream, **environment))
+            bar.set_description(f"{name}, stream {stream + 1}/{streams}", refresh=False)
+            runs.append(run_baseline(name, split, episodes, flight, task=task, stream=stream,
+                                     on_progress=bar.follow(), **environment))
+            bar.note(f"[scripted] {name}, stream {stream + 1}/{streams}: success {runs[-1]['success_rate']:.1%}")
         first[name] = runs[0]
         rows.append({"label": SCRIPTED_LABELS.get(name, name), "baseline": name, "kind": "scripted",
                      **group_stats(runs), "metrics": runs})
@@ -127,7 +129,8 @@ def render_task_table(summary: dict) -> list[str]:
            "with other detection draws). IQM: interquartile mean over runs x the 12 condition strata "
            f"({' x '.join(STRATA)}), with a stratified-bootstrap 95 % interval (policies/evaluation/aggregate.py).", "",
            "| method | runs | success (mean ± std, t 95 %) | IQM [bootstrap 95 %] | pooled [Wilson 95 %] | ran dry | "
-           "returned | reward (mean, t 95 %) | collision | out of bounds |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "returned | reward (mean, t 95 %) | collision | out of bounds |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         aggregate_ = r.get("aggregate")
         iqm = f"{_pct(aggregate_['iqm'])} {_ci(aggregate_['iqm_ci95'])}" if aggregate_ else "—"

@@ -1,5 +1,6 @@
 """What a training run tells as it goes: one row of ``progress.csv`` every ``log_every`` steps, the same figures
-as tensorboard scalars (``<run>/tensorboard``) and a progress line on stderr.
+as tensorboard scalars (``<run>/tensorboard``) and a progress bar on stderr (steps, rate, time left, and the
+last row's episodes, success and return; ``policies.reports.progress``).
 
 The columns are ``LOG_FIELDS``; rolling figures are over the last ``WINDOW`` finished episodes. A resumed run
 first drops the rows written after its checkpoint (``truncate_after``): they are written again as it continues.
@@ -9,11 +10,12 @@ from __future__ import annotations
 import csv
 import math
 import os
-import sys
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from policies.reports.progress import progress_bar
 
 LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
               "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",
@@ -28,7 +30,10 @@ def progress_row(step: int, episodes: int, recent: Sequence[tuple], recent_subgo
     ``recent_subgoals`` 1 or 0 per finished goal segment (its point reached in time), ``metrics`` the latest
     losses and temperatures."""
     recent = np.array(recent) if len(recent) else np.zeros((0, 4))
-    mean = (lambda column: float(recent[:, column].mean()) if len(recent) else math.nan)
+
+    def mean(column: int) -> float:
+        return float(recent[:, column].mean()) if len(recent) else math.nan
+
     m = metrics
     return {"step": step, "episodes": episodes, "success_rate": mean(0), "mean_return": mean(1),
             "mean_length": mean(2), "mean_coverage": mean(3),
@@ -41,12 +46,13 @@ def progress_row(step: int, episodes: int, recent: Sequence[tuple], recent_subgo
 
 
 class ProgressLog:
-    """``progress.csv`` (appended to), tensorboard and the stderr line of the run in ``run_dir``; use as a
-    context manager around the training loop."""
+    """``progress.csv`` (appended to), tensorboard and the progress bar of the run in ``run_dir``, from
+    ``first_step`` to ``end_step``; use as a context manager around the training loop."""
 
-    def __init__(self, run_dir: Path, first_step: int, show_progress: bool = True):
-        self.run_dir, self.first_step, self.show_progress = Path(run_dir), first_step, show_progress
-        self._handle = self._writer = None
+    def __init__(self, run_dir: Path, first_step: int, end_step: int, show_progress: bool = True):
+        self.run_dir, self.first_step, self.end_step = Path(run_dir), first_step, end_step
+        self.show_progress = show_progress
+        self._handle = self._writer = self._bar = None
         self._tensorboard = None
 
     def __enter__(self) -> ProgressLog:
@@ -56,18 +62,28 @@ class ProgressLog:
         self._writer = csv.DictWriter(self._handle, fieldnames=LOG_FIELDS)
         if new_file:
             self._writer.writeheader()
+        self._bar = progress_bar(self.end_step, "step", "training", self.show_progress, initial=self.first_step)
         return self
 
     def __exit__(self, *exc) -> None:
+        self._bar.close()
         self._handle.close()
 
-    def write(self, row: dict, end_step: int) -> None:
-        """Log ``row`` (``progress_row``) everywhere; ``end_step`` is where the progress bar ends."""
+    def advance(self, step: int) -> None:
+        """The run is at ``step``: the bar moves on."""
+        self._bar.advance_to(step)
+
+    def write(self, row: dict) -> None:
+        """Log ``row`` (``progress_row``) everywhere; the bar shows its episodes, success and return."""
         self._writer.writerow(row)
         self._handle.flush()
         self._add_scalars(row)
-        if self.show_progress:
-            self._print(row, end_step)
+        shown = [f"episodes {row['episodes']}"]
+        if row["episodes"]:
+            shown += [f"success {row['success_rate']:.0%}", f"return {row['mean_return']:.1f}"]
+        if not math.isnan(row["eval_success_rate"]):
+            shown.append(f"val success {row['eval_success_rate']:.0%}")
+        self._bar.set_postfix_str(", ".join(shown), refresh=False)
 
     def close(self) -> None:
         """Close tensorboard's writer (the csv file closes with the context)."""
@@ -86,15 +102,6 @@ class ProgressLog:
             for key, value in row.items():
                 if key != "step" and not math.isnan(value):
                     self._tensorboard.add_scalar(key, value, row["step"])
-
-    def _print(self, row: dict, end_step: int) -> None:
-        done = row["step"] / end_step
-        bar = "#" * int(30 * done) + "." * (30 - int(30 * done))
-        line = (f"[{bar}] {row['step']:,}/{end_step:,} steps  {row['steps_per_s']:,.0f}/s  episodes "
-                f"{row['episodes']}  success {row['success_rate']:.0%}  return {row['mean_return']:.1f}"
-                + ("" if math.isnan(row["eval_success_rate"]) else f"  val success {row['eval_success_rate']:.0%}"))
-        print(("\r" + line) if sys.stderr.isatty() else line, end="" if sys.stderr.isatty() else "\n",
-              file=sys.stderr, flush=True)
 
 
 def truncate_after(run_dir: Path, step: int) -> None:

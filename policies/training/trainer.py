@@ -261,9 +261,10 @@ class Trainer:
         last_log = self.step // cfg.log_every
         last_checkpoint = self.step // cfg.checkpoint_every
         last_eval = self.step // cfg.eval_every if cfg.eval_every else 0
-        with ProgressLog(self.run_dir, self.step, progress) as log:
+        with ProgressLog(self.run_dir, self.step, end, progress) as log:
             while self.step < end:
                 self.learn(self.collect())
+                log.advance(self.step)
                 if cfg.eval_every and self.evaluate and self.step // cfg.eval_every > last_eval:
                     last_eval = self.step // cfg.eval_every
                     self.quick_evaluation()
@@ -271,20 +272,17 @@ class Trainer:
                     last_log = self.step // cfg.log_every
                     steps_per_s = (self.step - started_step) / max(time.perf_counter() - started, 1e-9)
                     log.write(progress_row(self.step, self.episodes, self.recent, self.recent_subgoals,
-                                           self.metrics, steps_per_s), end)
+                                           self.metrics, steps_per_s))
                 if self.step // cfg.checkpoint_every > last_checkpoint:
                     last_checkpoint = self.step // cfg.checkpoint_every
                     self.save()
         if self.step >= cfg.total_steps and self.best is not None:
             self._restore_best()  # meta_keep_best / keep_best: the run ends with the best policy
         path = self.save()
-        if progress:
-            print(file=sys.stderr)
-            if self.best is not None and self.step >= cfg.total_steps:
-                kept = "meta-controller" if self.hrl else "policy"
-                print(f"kept the {kept} of step {self.best['step']:,} (val success "
-                      f"{self.best['success']:.1%}, ran dry {self.best.get('ran_dry', 0.0):.1%}, on "
-                      f"{cfg.eval_episodes} episodes)", file=sys.stderr)
+        if progress and self.best is not None and self.step >= cfg.total_steps:
+            kept = "meta-controller" if self.hrl else "policy"
+            print(f"kept the {kept} of step {self.best['step']:,} (val success {self.best['success']:.1%}, ran dry "
+                  f"{self.best.get('ran_dry', 0.0):.1%}, on {cfg.eval_episodes} episodes)", file=sys.stderr)
         log.close()
         return path
 
