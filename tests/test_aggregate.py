@@ -1,11 +1,17 @@
-"""rliable-style aggregates (``policies.evaluation.aggregate``): the interquartile mean and its stratified bootstrap interval."""
+"""rliable-style aggregates (``policies.evaluation.aggregate``): the interquartile mean and its stratified bootstrap
+interval."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from policies.evaluation.aggregate import (aggregate, interquartile_mean, paired_scenario_bootstrap, score_matrix,
-                                          stratified_bootstrap_ci)
+from policies.evaluation.aggregate import (
+    aggregate,
+    interquartile_mean,
+    paired_scenario_bootstrap,
+    score_matrix,
+    stratified_bootstrap_ci,
+)
 
 
 def test_interquartile_mean_is_the_trimmed_mean_with_fractional_cut_offs():

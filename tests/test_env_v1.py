@@ -11,9 +11,9 @@ import policies  # noqa: F401  (registers SarSearch-v1)
 from autonomy.observation import LAYOUT_V4, PLAN_OFFSET_SCALE_M
 from missions.mission import FlightSettings
 from missions.scenario import Obstacle, Scenario, SearchArea, Target
-from policies.env.task_v1 import RETURN_RESERVE, REWARD_RAN_DRY, REWARD_RETURNED
 from policies.env.core import REWARD_TARGET, SarSearchConfig
 from policies.env.gym_env import SarSearchEnv
+from policies.env.task_v1 import RETURN_RESERVE, REWARD_RAN_DRY, REWARD_RETURNED
 from policies.env.vector import SarSearchVectorEnv
 
 AREA = SearchArea(-50.0, 950.0, -500.0, 500.0)

@@ -27,8 +27,14 @@ from policies.cli.export import main as export_main
 from policies.config import NetworkConfig, TrainConfig
 from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
 from policies.export.module import PRECISIONS, policy_module
-from policies.export.parity import (ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, TOLERANCES, Parity, check_parity,
-                                    record_observations)
+from policies.export.parity import (
+    ACTION_TOLERANCE,
+    INT8_ACTION_TOLERANCE,
+    TOLERANCES,
+    Parity,
+    check_parity,
+    record_observations,
+)
 from policies.training.trainer import Trainer
 
 ALGOS = ("hrl-sac", "sac")
@@ -280,10 +286,11 @@ def test_refuses_an_artifact_with_another_observation_layout(runs, tmp_path, fmt
 
 def test_a_sarsearch_v0_run_is_not_exported_for_the_runtime_that_flies_v1():
     from policies.config import TrainConfig
-    from policies.export.module import PRECISIONS, policy_module
+    from policies.export.module import policy_module
 
     v0 = CheckpointPolicy.untrained(TrainConfig.from_preset("default", task="SarSearch-v0"))
-    with pytest.raises(ValueError, match=r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"):
+    message = r"trained on SarSearch-v0 \(observation layout 3\); the runtime flies layout 4"
+    with pytest.raises(ValueError, match=message):
         policy_module(v0)
 
 

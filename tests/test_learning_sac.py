@@ -5,7 +5,6 @@ core, and together in one file they were the suite's longest stretch."""
 from __future__ import annotations
 
 import pytest
-
 from easy_missions import check_learns
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]

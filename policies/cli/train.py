@@ -17,7 +17,6 @@ from pathlib import Path
 from hrlsac_cli.help_format import HelpFormatter
 from policies.checkpoint import CHECKPOINT
 
-
 # The options a sweep file's run decides; given beside --sweep they would be ignored, so they are refused.
 SWEEP_DECIDES = {"algo": "--algo", "preset": "--preset", "steps": "--steps", "seed": "--seed",
                  "num_envs": "--num-envs", "set": "--set"}
@@ -38,8 +37,8 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                                       "--sweep, default: the run's folder in the sweep's 'out'")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     parser.add_argument("--set", action="append", metavar="FIELD=VALUE",
-                        help="override a TrainConfig field (JSON value; dotted for nested fields), e.g. --set warmup_steps=500 "
-                             "--set flight.max_steps=120 --set actor.hidden=[64,64]")
+                        help="override a TrainConfig field (JSON value; dotted for nested fields), e.g. "
+                             "--set warmup_steps=500 --set flight.max_steps=120 --set actor.hidden=[64,64]")
     parser.add_argument("--sweep", metavar="FILE", help="take the settings of one run of this sweep file "
                                                         "(docs/scaling.md) instead of the options above")
     parser.add_argument("--run", metavar="NAME", help="with --sweep: the run to train, e.g. hrl-sac-default-seed0 "

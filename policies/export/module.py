@@ -24,11 +24,10 @@ import torch
 from torch import Tensor, nn
 
 from autonomy.observation import META_OBS_DIM, NO_GOAL, OBS_DIM, OBSERVATION_LAYOUT_VERSION
-from policies.checkpoint import CheckpointPolicy
 from policies.agents.action_scaler import ActionScaler
 from policies.agents.networks import CategoricalActor, SquashedGaussianActor
 from policies.agents.normalizer import RunningMeanStd
-
+from policies.checkpoint import CheckpointPolicy
 
 PRECISIONS = ("float32", "int8")
 

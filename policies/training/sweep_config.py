@@ -102,7 +102,10 @@ def sweep_from_dict(data: Any, source: str = "<sweep>", default_name: str = "swe
     unknown = sorted(set(map(str, data)) - set(_TOP_KEYS))
     if unknown:
         raise SweepFileError(source, unknown[0], f"unknown key; allowed: {', '.join(_TOP_KEYS)}")
-    fail = (lambda key, reason: SweepFileError(source, key, reason))
+
+    def fail(key: str, reason: str) -> SweepFileError:
+        return SweepFileError(source, key, reason)
+
     name = data.get("name", default_name)
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9._-]+", name):
         raise fail("name", f"must be letters, digits, '.', '_' or '-', got {name!r}")
