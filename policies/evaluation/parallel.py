@@ -8,10 +8,10 @@ episodes bit-identical to the same episodes inside the whole batch:
 * everything in the environment is per row (the detection draws come from a generator keyed by the episode
   seed, the physics and the search state are element-wise numpy), so the other rows of a batch do not matter;
 * the policy's matrix products are: torch's CPU kernels give the same row whatever else is in the batch, except
-  for batches of 1-3 rows, which take a different (matrix-vector) path with another summation order (measured
-  here: the actions of 1-3 rows differ in the last bits from the same rows in a larger batch). Every policy call
-  is therefore padded to at least :data:`MIN_POLICY_ROWS` rows; serial and chunked runs both pad, so both see
-  the same numbers (a meta decision for 2 remaining episodes is a batch of 8 either way).
+  for batches of 1-3 rows, which take a different (matrix-vector) path with another summation order (the actions
+  of 1-3 rows differ in the last bits from the same rows in a larger batch). Every policy call is therefore padded
+  to at least :data:`MIN_POLICY_ROWS` rows; serial and chunked runs both pad, so both see the same numbers (a meta
+  decision for 2 remaining episodes is a batch of 8 either way).
 
 Workers also compute with one torch thread each (:mod:`simulation.worker_pool`), as the serial path does.
 """
