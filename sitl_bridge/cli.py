@@ -14,8 +14,9 @@ from sitl_bridge.ardupilot.params import STREAM_GROUPS, STREAM_LINKS
 from sitl_bridge.autopilot_base import AutopilotEvent
 from sitl_bridge.faults import SPEC_HELP, parse_link_faults
 from sitl_bridge.serial_link import SerialLink, open_pty_link, open_serial_link
-from sitl_bridge.server import UdpPorts, VehicleServer
+from sitl_bridge.server import UdpPorts, VehicleServer, fleet_configs
 from sitl_bridge.telemetry_profiles import PROFILES, resolve_profile
+from sitl_bridge.vehicle import SYSTEM_ID_PARAM
 from sitl_bridge.vehicle_config import AUTOPILOT_TYPES, DEFAULT_HOME, VehicleConfig
 from sitl_bridge.wind import Wind
 
@@ -52,6 +53,17 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                       help="reboot the autopilot at this simulated time (airborne, the vehicle falls)")
     home.add_argument("--reboot-downtime", type=float, default=5.0, metavar="S",
                       help="seconds the autopilot stays silent while it reboots")
+    fleet = parser.add_argument_group("several vehicles (PX4 SITL's and ArduPilot's instance numbering)")
+    fleet.add_argument("--count", type=int, default=1,
+                       help="vehicles to run in this process: instance N speaks as system N+1 on the instance's ports "
+                            "(PX4: API 14580+N -> 14540+N, GCS 18570+N -> 14550; ArduPilot: every port +10N, GCS "
+                            "-> 14550, companion -> 14551+10N)")
+    fleet.add_argument("--instance", type=int, default=0,
+                       help="the first vehicle's instance number (as px4 -i N or sim_vehicle.py -I N)")
+    fleet.add_argument("--offset-line", metavar="BEARING,DISTANCE", default=None,
+                       help="each further vehicle's home this far (m) along this bearing (degrees) from the one "
+                            "before (ArduPilot's --auto-offset-line; default: PX4 0,3 as sitl_multiple_run.sh, "
+                            "ArduPilot 90,10)")
     ports = parser.add_argument_group("links (defaults: PX4 SITL's, or for --autopilot ardupilot TCP 5760, "
                                       "GCS 14560 -> 14550, companion 14561 -> 14551)")
     ports.add_argument("--host", default="127.0.0.1", help="address to bind and to send to")
@@ -133,33 +145,65 @@ def serial_links_from_args(args: argparse.Namespace) -> tuple[SerialLink, ...]:
     return tuple(links)
 
 
-def ports_from_args(args: argparse.Namespace) -> UdpPorts:
-    """The personality's default ports, with the ones given on the command line (0 disables GCS and TCP)."""
-    ports = UdpPorts.for_autopilot(args.autopilot, args.host)
+def ports_from_args(args: argparse.Namespace, k: int = 0) -> UdpPorts:
+    """The ports of the ``k``-th vehicle (from 0): its instance's defaults, or the ones given on the command line,
+    which with ``--count`` are the first vehicle's and move up with the instance as the defaults do (by 1 for PX4,
+    10 for ArduPilot), except the GCS port all of them send to. 0 disables GCS and TCP."""
+    ports = UdpPorts.for_instance(args.autopilot, args.instance + k, args.host)
+    step = k * (10 if args.autopilot == "ardupilot" else 1)
     given = {"api_port": args.api_port, "api_remote_port": args.api_remote, "gcs_port": args.gcs_port,
              "gcs_remote_port": args.gcs_remote, "tcp_port": args.tcp_port}
-    given = {name: (None if value == 0 and name in ("gcs_remote_port", "tcp_port") else value)
+    given = {name: (None if value == 0 and name in ("gcs_remote_port", "tcp_port")
+                    else value if name == "gcs_remote_port" or value == 0 else value + step)
              for name, value in given.items() if value is not None}
     return dataclasses.replace(ports, **given)
+
+
+def fleet_from_args(args: argparse.Namespace, base: VehicleConfig) -> list[tuple[VehicleConfig, UdpPorts]]:
+    """Every vehicle of ``--count`` with its ports; one-line errors for what a fleet cannot take."""
+    if not 1 <= args.count <= 32:
+        raise ValueError(f"--count must be in [1, 32], got {args.count}")
+    if not 0 <= args.instance <= 200:
+        raise ValueError(f"--instance must be in [0, 200], got {args.instance}")
+    if args.count == 1:
+        single = dataclasses.replace(base, system_id=args.instance + 1) if args.instance else base
+        return [(single, ports_from_args(args))]
+    if args.pty or args.serial:
+        raise ValueError(f"{'--pty' if args.pty else '--serial'} serves one vehicle; run one hrlsac sitl per "
+                         "vehicle on a serial line")
+    if SYSTEM_ID_PARAM[args.autopilot] in base.params:
+        raise ValueError(f"--param {SYSTEM_ID_PARAM[args.autopilot]}: with --count each instance N is system N+1")
+    line = tuple(_floats(args.offset_line, 2, "--offset-line")) if args.offset_line else None
+    configs = fleet_configs(base, args.count, args.instance, line)
+    return [(config, ports_from_args(args, k)) for k, config in enumerate(configs)]
 
 
 def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
     args = build_parser(prog).parse_args(argv)
     try:
-        config = config_from_args(args)
-        ports = ports_from_args(args)
-
-        def log(event: AutopilotEvent) -> None:
-            if not args.quiet:
-                print(f"[{event.time_s:9.2f} s] {event.text}", flush=True)
-
+        fleet = fleet_from_args(args, config_from_args(args))
         faults = parse_link_faults(args.link_faults) if args.link_faults else None
-        server = VehicleServer(config, ports, speed=args.speed, on_event=log, link_faults=faults,
-                               extra_links=serial_links_from_args(args))
+        if len(fleet) == 1:
+            (config, ports), = fleet
+
+            def log(event: AutopilotEvent) -> None:
+                if not args.quiet:
+                    print(f"[{event.time_s:9.2f} s] {event.text}", flush=True)
+
+            server = VehicleServer(config, ports, speed=args.speed, on_event=log, link_faults=faults,
+                                   extra_links=serial_links_from_args(args))
+        else:
+            def log_vehicle(index: int, event: AutopilotEvent) -> None:
+                if not args.quiet:
+                    print(f"[{event.time_s:9.2f} s] sysid {fleet[index][0].system_id}: {event.text}", flush=True)
+
+            server = VehicleServer.fleet(fleet, speed=args.speed, on_event=log_vehicle, link_faults=faults)
     except (ValueError, OSError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
-    print_connections(config, ports, server, args)
+    for index, (config, ports) in enumerate(fleet):
+        print_connections(config, ports, server, args, index)
+    print_settings(fleet[0][0], server, args)
     # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and Python then
     # installs no KeyboardInterrupt handler: install it, and treat SIGTERM (service managers, kill) the same.
     signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -172,23 +216,28 @@ def main(argv: list[str], prog: str = "hrlsac sitl") -> int:
         print("\nstopping", flush=True)
     finally:
         server.stop()
-    if server.vehicle.signing is not None:
-        print(f"signing: {server.vehicle.signing.describe_rejections()}", flush=True)
+    for vehicle in server.vehicles:
+        if vehicle.signing is not None:
+            which = f" (sysid {vehicle.system_id})" if len(server.vehicles) > 1 else ""
+            print(f"signing{which}: {vehicle.signing.describe_rejections()}", flush=True)
     if server.error is not None:
         print(f"{prog}: error: {server.error}", file=sys.stderr)
         return 1
     return 0
 
 
-def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleServer, args: argparse.Namespace) -> None:
-    """What runs, and the connection string of every link for the usual clients."""
+def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleServer, args: argparse.Namespace,
+                      index: int = 0) -> None:
+    """What vehicle ``index`` of the server is, and the connection string of each of its links for the usual
+    clients."""
     home, host = config.home, ports.host
     name = "ArduPilot Copter" if config.autopilot == "ardupilot" else "PX4"
-    print(f"Simulated {name} multirotor (sysid {config.system_id}) at {home.lat_deg:.6f}, {home.lon_deg:.6f}, "
-          f"{home.alt_m:.1f} m AMSL; {args.speed:g}x real time, seed {args.seed}")
+    which = f"vehicle {index + 1} of {len(server.vehicles)}: " if len(server.vehicles) > 1 else ""
+    print(f"{which}Simulated {name} multirotor (sysid {server.vehicles[index].system_id}) at {home.lat_deg:.6f}, "
+          f"{home.lon_deg:.6f}, {home.alt_m:.1f} m AMSL; {args.speed:g}x real time, seed {config.seed}")
     ardupilot = config.autopilot == "ardupilot"
-    for index, link in enumerate(server.links):
-        streams = f" (SR{index}_*)" if ardupilot else ""
+    for link_index, link in enumerate(server.vehicle_links[index]):
+        streams = f" (SR{link_index}_*)" if ardupilot else ""
         if isinstance(link, SerialLink):
             print(f"  serial    {link.device}{streams}   mission run: --connect serial:{link.device}"
                   f"   MAVProxy: --master={link.device}")
@@ -203,6 +252,13 @@ def print_connections(config: VehicleConfig, ports: UdpPorts, server: VehicleSer
             print(f"  {label} udp {host}:{ports.api_port} -> {host}:{ports.api_remote_port}{streams}"
                   f"   MAVSDK: udpin://0.0.0.0:{ports.api_remote_port}   pymavlink / mission run: "
                   f"udpin:0.0.0.0:{ports.api_remote_port} or udpout:{host}:{ports.api_port}")
+
+
+def print_settings(config: VehicleConfig, server: VehicleServer, args: argparse.Namespace) -> None:
+    """What every vehicle of the server shares: telemetry, boot, signing, link faults."""
+    if len(server.vehicles) > 1:
+        print(f"  all {len(server.vehicles)} vehicles send to the GCS port, each as its own system id "
+              "(QGroundControl and MAVProxy's 'vehicle N' tell them apart)")
     profile = resolve_profile(config.telemetry_profile, config.autopilot)
     if profile == "ardupilot":
         print_ardupilot_streams(server)

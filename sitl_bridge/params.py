@@ -91,7 +91,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_FAIL_ACT_T", REAL32, 5.0, 0.0, 25.0,
               "hold this long before a geofence or battery Return / Land (s); a mode switch meanwhile cancels it"),
     ParamSpec("MAV_SYS_ID", INT32, 1, 1, 250,
-              "this vehicle's MAVLink system id (read-only here: set it on the command line)"),
+              "this vehicle's MAVLink system id, read once at boot (mavlink_main.cpp: PX4 does not allow it to change "
+              "during operation): a PARAM_SET takes effect after a reboot"),
     ParamSpec("SYS_AUTOSTART", INT32, 10016, 0, 9999999, "airframe id (10016: the SITL quadrotor)"),
     # Non-zero calibration ids: some ground stations judge sensors "calibrated" from these.
     ParamSpec("CAL_GYRO0_ID", INT32, 1311244, 0, 2**31 - 1, "gyro calibration id (non-zero = calibrated)"),
@@ -99,7 +100,6 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("CAL_MAG0_ID", INT32, 197388, 0, 2**31 - 1, "magnetometer calibration id (non-zero = calibrated)"),
 )
 
-READ_ONLY = frozenset({"MAV_SYS_ID"})
 
 
 def encode_bytewise(value: float, kind: int) -> float:
@@ -127,11 +127,9 @@ def decode_float(wire_value: float, kind: int) -> float:
 class ParameterStore:
     """Values by name, in a fixed order (the PARAM_VALUE index), with validation on set."""
 
-    def __init__(self, overrides: dict[str, float] | None = None, specs: tuple[ParamSpec, ...] = PARAM_SPECS,
-                 read_only: frozenset[str] = READ_ONLY):
-        """``specs``: the personality's table (PX4's by default); ``read_only``: names PARAM_SET may not change."""
+    def __init__(self, overrides: dict[str, float] | None = None, specs: tuple[ParamSpec, ...] = PARAM_SPECS):
+        """``specs``: the personality's table (PX4's by default)."""
         self.specs = {spec.name: spec for spec in specs}
-        self.read_only = read_only
         self._values = {spec.name: float(spec.default) for spec in specs}
         for name, value in (overrides or {}).items():  # hidden ones too: the order of overrides must not matter
             error = self._check_value(name, value)
@@ -180,8 +178,6 @@ class ParameterStore:
     def set(self, name: str, value: float) -> str | None:
         """Store a value; returns the reason it was refused (value unchanged), or None."""
         error = self.check(name, value)
-        if error is None and name in self.read_only:
-            error = f"{name} is read-only"
         if error is None:
             self._values[name] = float(value)
         return error

@@ -35,6 +35,7 @@ class TelemetrySource(Protocol):
     rather than imported so that this module, which the vehicle imports, does not import the vehicle."""
 
     config: VehicleConfig
+    system_id: int
     autopilot: AutopilotBase
     sensors: SensorSuite
     state: VehicleState
@@ -235,7 +236,7 @@ def autopilot_version(v: TelemetrySource) -> mavlink.MAVLink_message:
     ap = v.autopilot
     return mavlink.MAVLink_autopilot_version_message(
         ap.CAPABILITIES, ap.FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-        0x5349_4D00_0000_0000 | v.config.system_id)  # "SIM" + system id: stable across runs
+        0x5349_4D00_0000_0000 | v.system_id)  # "SIM" + system id: stable across runs
 
 
 BUILDERS: dict[int, Callable[[TelemetrySource], mavlink.MAVLink_message | None]] = {

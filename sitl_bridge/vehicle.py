@@ -26,7 +26,7 @@ from sitl_bridge.ardupilot.autopilot import ArduCopter
 from sitl_bridge.ardupilot.fence_protocol import CopterFenceTransfer
 from sitl_bridge.ardupilot.item_protocol import CopterTransfers
 from sitl_bridge.ardupilot.mission_protocol import CopterMissionTransfer
-from sitl_bridge.ardupilot.params import ARDUPILOT_PARAM_SPECS, ARDUPILOT_READ_ONLY
+from sitl_bridge.ardupilot.params import ARDUPILOT_PARAM_SPECS
 from sitl_bridge.ardupilot.rally import CopterRallyTransfer
 from sitl_bridge.autopilot_base import AutopilotBase, AutopilotEvent
 from sitl_bridge.endpoint import Endpoint
@@ -50,12 +50,18 @@ def make_autopilot(config: VehicleConfig, params: ParameterStore, frame: LocalFr
     return Px4Autopilot(params, config.airframe, frame)
 
 
+SYSTEM_ID_PARAM = {"px4": "MAV_SYS_ID", "ardupilot": "SYSID_THISMAV"}
+"""The parameter that holds the vehicle's MAVLink system id, read once at boot (PX4's mavlink_main.cpp keeps the id
+it started with, "we don't allow them to change during operation"; ArduPilot's GCS::init sets it at boot)."""
+
+
 def make_params(config: VehicleConfig) -> ParameterStore:
-    """The personality's parameter table with the configured overrides (kept across reboots, like flash)."""
+    """The personality's parameter table with the configured overrides (kept across reboots, like flash); the
+    configured system id is the default of the system-id parameter, which an override wins over."""
+    defaults = {SYSTEM_ID_PARAM[config.autopilot]: config.system_id, **config.params}
     if config.autopilot == "ardupilot":
-        return ParameterStore({"SYSID_THISMAV": config.system_id, **config.params}, ARDUPILOT_PARAM_SPECS,
-                              ARDUPILOT_READ_ONLY)
-    return ParameterStore(config.params)
+        return ParameterStore(defaults, ARDUPILOT_PARAM_SPECS)
+    return ParameterStore(defaults)
 
 
 class SimulatedVehicle(MessageHandlers):
@@ -81,6 +87,7 @@ class SimulatedVehicle(MessageHandlers):
         self.is_ardupilot = config.autopilot == "ardupilot"
         self.telemetry_profile = resolve_profile(config.telemetry_profile, config.autopilot)
         self.params = make_params(config)
+        self.system_id = self._boot_system_id()
         self.autopilot = make_autopilot(config, self.params, self.frame)
         self.links = list(links)
         self.endpoints = self._make_endpoints()
@@ -124,12 +131,17 @@ class SimulatedVehicle(MessageHandlers):
         self.sensors.update(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self.autopilot.gps_ok = self.sensors.gps is not None
 
+    def _boot_system_id(self) -> int:
+        """The system id this boot speaks as: the system-id parameter as it is now (a later PARAM_SET waits for the
+        next boot, as on PX4 and ArduPilot)."""
+        return int(self.params[SYSTEM_ID_PARAM[self.config.autopilot]])
+
     def _make_endpoints(self) -> list[Endpoint]:
         """One endpoint per link, with the profile's rates (ArduPilot: the SRn_* parameters as they are at boot)."""
         endpoints = []
         for index, link in enumerate(self.links):
             rates = link_rates_hz(self.telemetry_profile, link.name, index, self.params)
-            endpoints.append(Endpoint(link, self.config.system_id, {**rates, **self.config.telemetry_rates_hz}, index))
+            endpoints.append(Endpoint(link, self.system_id, {**rates, **self.config.telemetry_rates_hz}, index))
         return endpoints
 
     # ------------------------------------------------------------------ time
@@ -300,6 +312,7 @@ class SimulatedVehicle(MessageHandlers):
         self.autopilot = make_autopilot(self.config, self.params, self.frame)
         self.autopilot.gps_ok = self.sensors.gps is not None
         self.mission_reports = telemetry.MissionReports()
+        self.system_id = self._boot_system_id()
         self.endpoints = self._make_endpoints()
         if self.signing is not None:
             for link_id, endpoint in enumerate(self.endpoints):

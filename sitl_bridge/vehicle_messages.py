@@ -38,6 +38,7 @@ class MessageHandlers:
     """
 
     config: VehicleConfig
+    system_id: int
     params: ParameterStore
     autopilot: AutopilotBase
     state: VehicleState
@@ -49,6 +50,8 @@ class MessageHandlers:
     setup_signing_refused: int
     is_ardupilot: bool
     dt_s: float
+    tick: int
+    _reboot_tick: int | None
     time_s: float
     time_since_boot_s: float
     log: Callable[[str], None]
@@ -97,7 +100,7 @@ class MessageHandlers:
 
     def _for_us(self, msg: mavlink.MAVLink_message,
                 components: tuple[int, ...] = (AUTOPILOT_COMPONENT,)) -> bool:
-        return (msg.target_system in (0, self.config.system_id)
+        return (msg.target_system in (0, self.system_id)
                 and msg.target_component in (0, *components))
 
     # ------------------------------------------------------------------ commands
@@ -133,6 +136,8 @@ class MessageHandlers:
             else:
                 # mavlink_receiver.cpp handle_request_message_command: ACCEPTED only if the stream sent it
                 result = ACCEPTED if follow_up is not None else DENIED
+        elif command == mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+            result = self.reboot_request(p[0])
         elif command == mavlink.MAV_CMD_GET_HOME_POSITION and self.is_ardupilot:
             # GCS_MAVLINK::handle_command_get_home_position: FAILED until home is set, else the message
             follow_up = telemetry.known_home_position(self)
@@ -146,6 +151,28 @@ class MessageHandlers:
         if command not in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL) or result != ACCEPTED:
             self.log(f"command {_command_name(command)} from {msg.get_srcSystem()}/{msg.get_srcComponent()}: "
                      f"{_result_name(result)}")
+
+    def reboot_request(self, what: float) -> int:
+        """MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN's result for the autopilot (param1 ``what``); an accepted reboot
+        starts a moment after the ACK went out. PX4 (Commander.cpp): 0 does nothing, 1 reboots unless armed, else
+        DENIED; the reboot follows after 400 ms (px4_reboot_request). ArduPilot (GCS_Common.cpp
+        handle_preflight_reboot): only 1 and 3 (to the bootloader) are known, FAILED while armed, the reboot 200 ms
+        after the ACK."""
+        code = int(what) if math.isfinite(what) else -1
+        if self.is_ardupilot:
+            if code not in (1, 3):
+                return mavlink.MAV_RESULT_UNSUPPORTED
+            if self.autopilot.armed:
+                return mavlink.MAV_RESULT_FAILED
+            delay_s = 0.2
+        else:
+            if code == 0:
+                return mavlink.MAV_RESULT_ACCEPTED
+            if code != 1 or self.autopilot.armed:
+                return mavlink.MAV_RESULT_DENIED
+            delay_s = 0.4
+        self._reboot_tick = self.tick + max(1, int(round(delay_s / self.dt_s)))
+        return mavlink.MAV_RESULT_ACCEPTED
 
     def _on_request_data_stream(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         """GCS_MAVLINK::handle_request_data_stream: start_stop 1 streams the group at req_message_rate, 0 stops it;
@@ -181,7 +208,7 @@ class MessageHandlers:
 
     def _on_set_mode(self, endpoint: Endpoint, msg: mavlink.MAVLink_message) -> None:
         """The legacy SET_MODE message: PX4 sends no ACK, ArduPilot a COMMAND_ACK with command 11."""
-        if msg.target_system != self.config.system_id:
+        if msg.target_system != self.system_id:
             return
         result = self.autopilot.handle_set_mode_message(msg.base_mode, msg.custom_mode, self.time_s, self.state)
         if result is not None:

@@ -74,6 +74,7 @@ class UdpClient:
         self.received: list[object] = []
         self.stream: tuple[float, float, float] | None = None  # NED velocity re-sent at 20 Hz
         self.stream_frame = 1  # MAV_FRAME_LOCAL_NED
+        self.target_system = 1  # the vehicle commands and setpoints go to (a fleet has several)
         self._next_send = 0.0
 
     def pump(self, seconds: float) -> None:
@@ -85,7 +86,7 @@ class UdpClient:
             now = time.monotonic()
             if self.stream is not None and now >= self._next_send:
                 vn, ve, vd = self.stream
-                self.conn.mav.set_position_target_local_ned_send(0, 1, 1, self.stream_frame, 3527,
+                self.conn.mav.set_position_target_local_ned_send(0, self.target_system, 1, self.stream_frame, 3527,
                                                                  0, 0, 0, vn, ve, vd, 0, 0, 0, 0, 0)
                 self._next_send = now + 0.05
             if now >= end:
@@ -117,7 +118,7 @@ class UdpClient:
     def command(self, command: int, *params: float, timeout_s: float = 3.0, target_component: int = 1):
         """COMMAND_LONG; returns the matching COMMAND_ACK."""
         p = list(params) + [0.0] * (7 - len(params))
-        self.conn.mav.command_long_send(1, target_component, command, 0, *p)
+        self.conn.mav.command_long_send(self.target_system, target_component, command, 0, *p)
         return self.wait_message("COMMAND_ACK", timeout_s, lambda m: m.command == command)
 
     def close(self) -> None:

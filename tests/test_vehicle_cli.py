@@ -71,9 +71,9 @@ def banner(capsys, server_params: dict[str, float], udp_ports: list[int]) -> lis
     server = VehicleServer(config, ports)
     try:
         cli.print_connections(config, ports, server, args)
+        cli.print_settings(config, server, args)
     finally:
-        for link in server.links:
-            link.close()
+        server.close()
     return [line.strip() for line in capsys.readouterr().out.splitlines() if "telemetry" in line or "MAVSDK on" in line]
 
 

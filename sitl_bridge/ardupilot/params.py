@@ -27,7 +27,8 @@ _MONITOR = "BATT_MONITOR"
 
 ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("SYSID_THISMAV", INT16, 1, 1, 255,
-              "this vehicle's MAVLink system id (read-only here: set it on the command line)"),
+              "this vehicle's MAVLink system id, read once at boot (GCS::init): a PARAM_SET takes effect after a "
+              "reboot"),
     ParamSpec("SYSID_MYGCS", INT16, 255, 1, 255,
               "the ground station's system id: only its HEARTBEATs keep the GCS failsafe off"),
     ParamSpec("INITIAL_MODE", INT8, 0, 0, 17, "mode at boot (0 STABILIZE)", allowed=(0, 4, 5, 6, 9, 17)),
@@ -99,4 +100,3 @@ ARDUPILOT_PARAM_SPECS: tuple[ParamSpec, ...] = (
               "PARAM_SET at the next boot")
     for link in range(STREAM_LINKS) for group in STREAM_GROUPS)
 
-ARDUPILOT_READ_ONLY = frozenset({"SYSID_THISMAV"})
