@@ -17,14 +17,11 @@ from hrlsac_cli import GROUPS
 # mission_replay at the top, though only the workers fly it: on an on-board install (no OpenCV for the replay's
 # pictures) the command then says at once which extra it needs, before it reads any file.
 from simulation import mission_replay
+from hrlsac_cli.progress import progress_bar  # after mission_replay: see above
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 REPLAY_SUMMARY = GROUPS["mission"]["replay"][1]  # written once, in the dispatcher's table
-PROGRESS_EVERY_S = 0.2
-"""How often the progress bar is redrawn on a terminal."""
-PROGRESS_LOG_EVERY_S = 10.0
-"""How often a progress line is written when stderr is not a terminal (a log file, CI)."""
 
 
 def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
@@ -77,33 +74,6 @@ def parse_start_time(text: str) -> datetime:
     return moment
 
 
-class _LineStream:
-    """stderr when it is not a terminal: each progress update on a line of its own instead of carriage returns."""
-
-    def __init__(self, stream):
-        self.stream = stream
-
-    def write(self, text: str) -> None:
-        line = text.replace("\r", "").rstrip()
-        if line:
-            self.stream.write(line + "\n")
-
-    def flush(self) -> None:
-        self.stream.flush()
-
-
-def episode_progress(total: int, quiet: bool):
-    """A progress bar of ``total`` episodes on stderr, with the rate and the time left (tqdm); off with ``quiet`` or
-    a single episode (which narrates its flight instead). On a terminal it redraws in place; elsewhere it writes a
-    line at most every PROGRESS_LOG_EVERY_S. It writes nothing else, so no output file depends on it."""
-    from tqdm import tqdm
-
-    terminal = sys.stderr.isatty()
-    return tqdm(total=total, desc="episodes", unit="episode", disable=quiet or total == 1,
-                file=sys.stderr if terminal else _LineStream(sys.stderr), dynamic_ncols=terminal,
-                mininterval=PROGRESS_EVERY_S if terminal else PROGRESS_LOG_EVERY_S)
-
-
 def _replay(mission, policy, args, out: Path, prog: str) -> int:
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
     options = dict(signing_key=args.key, link_faults=args.faults, start_time=args.start)
@@ -113,7 +83,8 @@ def _replay(mission, policy, args, out: Path, prog: str) -> int:
                 for episode in range(args.episodes)]
     successes = 0
     started = time.perf_counter()
-    progress = episode_progress(args.episodes, quiet=args.quiet)
+    # a single episode narrates its flight instead
+    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet and args.episodes > 1)
 
     def show_progress(index: int, report: dict) -> None:
         nonlocal successes

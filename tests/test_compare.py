@@ -186,7 +186,7 @@ def test_cli_writes_the_report_and_prints_progress(runs, tmp_path):
 
 
 def test_the_progress_bar_counts_the_episodes_to_fly(runs, tmp_path, monkeypatch):
-    from policies.reports import progress
+    from hrlsac_cli import progress
 
     monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)  # not a terminal: a line at every update, from the first
     stream = io.StringIO()

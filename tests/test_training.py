@@ -44,7 +44,7 @@ def log_rows(path) -> list[dict]:
 
 def test_progress_bars_show_rate_and_time_left_on_stderr_and_change_nothing_else(tmp_path, capsys, monkeypatch):
     from policies.cli import evaluate as evaluate_command
-    from policies.reports import progress
+    from hrlsac_cli import progress
 
     monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)  # not a terminal: a line at every update, from the first
     config = small_config("sac", total_steps=400)

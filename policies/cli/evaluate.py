@@ -43,7 +43,7 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
         print(f"{prog}: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
         return 2
     from policies.evaluation.parallel import evaluate_checkpoint
-    from policies.reports.progress import progress_bar
+    from hrlsac_cli.progress import progress_bar
 
     try:
         environment, name, count = user_scenarios(args.missions, args.generator, args.run)

@@ -28,7 +28,7 @@ from policies.evaluation.stats import (  # noqa: F401
     t_quantile_975,
     wilson_interval,
 )
-from policies.reports.progress import progress_bar
+from hrlsac_cli.progress import progress_bar
 from policies.reports.runs import (  # noqa: F401  (re-exported: the comparison's data model)
     ALGO_LABELS,
     BASELINE_LABELS,

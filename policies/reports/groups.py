@@ -23,7 +23,7 @@ from policies.evaluation.aggregate import STRATA, aggregate, strata_of
 from policies.evaluation.episodes import FOUND_BY_S, episode_batch
 from policies.evaluation.stats import group_stats, intervals_overlap
 from policies.reports.figures import colour, new_figure, save_figure
-from policies.reports.progress import ProgressBar
+from hrlsac_cli.progress import ProgressBar
 from policies.reports.runs import CompareError, Run
 
 SCRIPTED_LABELS = {"random": "Random", "expanding_square": "Expanding square (bounded, repeated)",

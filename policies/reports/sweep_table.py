@@ -3,7 +3,7 @@ the sweep's progress over all its steps with the rate and the time left (tqdm's 
 
 On a terminal the table is redrawn in place (cursor up, clear to the end of the screen); into a file or a pipe
 it prints one plain line each time a run changes state, and the progress line at most every
-``policies.reports.progress.LOG_EVERY_S``, so logs stay readable, and the whole table at the end.
+``hrlsac_cli.progress.LOG_EVERY_S``, so logs stay readable, and the whole table at the end.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
-from policies.reports.progress import LOG_EVERY_S
+from hrlsac_cli.progress import LOG_EVERY_S
 
 PENDING, RUNNING, DONE, SKIPPED, FAILED = "pending", "running", "done", "skipped", "failed"
 

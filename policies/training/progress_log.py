@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from policies.reports.progress import progress_bar
+from hrlsac_cli.progress import progress_bar
 
 LOG_FIELDS = ("step", "episodes", "success_rate", "mean_return", "mean_length", "mean_coverage",
               "subgoal_reachability", "critic_loss", "actor_loss", "alpha", "meta_critic_loss", "meta_alpha",

@@ -1,4 +1,6 @@
-"""Progress bars of the learning commands (tqdm), with the rate and the time left, on stderr.
+"""Progress bars of the long commands (tqdm: train, sweep, evaluate, compare, multi-episode replay), with the rate
+and the time left, on stderr. Beside the dispatcher because every package's commands use it (tqdm belongs to the
+train extra: the on-board commands never import this module).
 
 On a terminal a bar redraws in place; into a file or a pipe (a log, CI) it writes a plain line at most every
 ``LOG_EVERY_S`` seconds, the first after that long (a shorter task leaves no line), so that a long run does not
