@@ -21,12 +21,13 @@ from pymavlink.dialects.v20 import common as mavlink
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import fuzz  # noqa: E402  (the fuzzing harness shared with the benchmark)
+import fuzz_frames  # noqa: E402  (its frames and mutations)
 
 from autonomy.vehicle_link import enum_name  # noqa: E402
 
 FUZZ = settings(derandomize=True, deadline=None, max_examples=500,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-CORPUS = fuzz.corpus(random.Random(0))
+CORPUS = fuzz_frames.corpus(random.Random(0))
 garbage_bytes = st.binary(min_size=1, max_size=300)
 
 
@@ -34,8 +35,8 @@ garbage_bytes = st.binary(min_size=1, max_size=300)
 def mutated_frames(draw) -> bytes:
     """A corpus frame damaged by one mutation, all choices drawn by hypothesis (so failures shrink)."""
     rng = draw(st.randoms(use_true_random=False))
-    kind = draw(st.sampled_from(fuzz.MUTATIONS))
-    return fuzz.mutate(draw(st.sampled_from(CORPUS)), kind, rng, draw(st.sampled_from(CORPUS)))
+    kind = draw(st.sampled_from(fuzz_frames.MUTATIONS))
+    return fuzz_frames.mutate(draw(st.sampled_from(CORPUS)), kind, rng, draw(st.sampled_from(CORPUS)))
 
 
 garbage = st.one_of(garbage_bytes, mutated_frames())
@@ -43,7 +44,7 @@ garbage = st.one_of(garbage_bytes, mutated_frames())
 
 def signed_by_the_owner(msg: mavlink.MAVLink_message) -> bytes:
     """``msg`` packed and signed with the targets' key (what the real ground station would send)."""
-    return msg.pack(fuzz.encoder(255, 190, fuzz.TARGET_KEY))
+    return msg.pack(fuzz_frames.encoder(255, 190, fuzz.TARGET_KEY))
 
 
 def param_values_sent(target: fuzz.VehicleTarget) -> list[str]:
@@ -86,7 +87,7 @@ def test_vehicle_flies_hostile_commands_and_keeps_a_finite_state(seed, autopilot
     target = fuzz.VehicleTarget(None, autopilot=autopilot)
     target.vehicle.run(1.0)
     for _ in range(40):
-        target.feed(fuzz.hostile_frame(rng))
+        target.feed(fuzz_frames.hostile_frame(rng))
     target.vehicle.run(0.5)
     assert target.violations() == [] and target.vehicle.handler_errors == 0
 
@@ -101,7 +102,7 @@ def test_a_lying_length_byte_does_not_swallow_the_next_datagram():
 
 # ---------------------------------------------------------------------------------------------- the runner
 def vehicle_heartbeat(sequence: int, key: bytes | None = None) -> bytes:
-    mav = fuzz.encoder(1, 1, key)
+    mav = fuzz_frames.encoder(1, 1, key)
     mav.seq = sequence % 256
     heartbeat = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 3, 3)
     return heartbeat.pack(mav)
@@ -130,10 +131,10 @@ def test_runner_keeps_a_finite_estimate_under_hostile_telemetry(seed):
     rng = random.Random(seed)
     target = fuzz.RunnerTarget(None)
     target.feed(vehicle_heartbeat(0))
-    mav = fuzz.encoder(1, 1)
+    mav = fuzz_frames.encoder(1, 1)
     for _ in range(30):
         kind = rng.choice(("GLOBAL_POSITION_INT", "HEARTBEAT", "HOME_POSITION", "SYS_STATUS", "COMMAND_ACK"))
-        target.feed(fuzz.hostile_message(rng, kind).pack(mav))
+        target.feed(fuzz_frames.hostile_message(rng, kind).pack(mav))
     assert target.violations() == []
 
 
@@ -142,7 +143,7 @@ def test_runner_keeps_a_finite_estimate_under_hostile_telemetry(seed):
 def test_extreme_global_positions_leave_the_estimate_finite(lat, lon, alt):
     target = fuzz.RunnerTarget(None)
     target.feed(vehicle_heartbeat(0))
-    mav = fuzz.encoder(1, 1)
+    mav = fuzz_frames.encoder(1, 1)
     for step in range(5):
         target.feed(mavlink.MAVLink_global_position_int_message(step * 10, lat, lon, alt, alt, 32767, -32768,
                                                                 32767, 65535).pack(mav))
@@ -157,7 +158,7 @@ def test_garbage_with_unknown_ids_and_hostile_chatter_keeps_memory_bounded():
     stores kept one entry per id or parameter name."""
     vehicle, runner = fuzz.VehicleTarget(None), fuzz.RunnerTarget(fuzz.TARGET_KEY)
     runner.feed(vehicle_heartbeat(0))
-    mav = fuzz.encoder(1, 1)
+    mav = fuzz_frames.encoder(1, 1)
     for index in range(1500):
         unknown = bytes([0xFD, 1, 0, 0, index % 256, 1, 1]) + (100_000 + index).to_bytes(3, "little") + bytes(3)
         vehicle.feed(unknown)
@@ -178,7 +179,7 @@ def test_forged_signed_frames_from_made_up_streams_keep_no_state():
     vehicle, runner = fuzz.VehicleTarget(fuzz.TARGET_KEY), fuzz.RunnerTarget(fuzz.TARGET_KEY)
     rng = random.Random(1)
     for _ in range(500):
-        forger = fuzz.encoder(rng.randrange(256), rng.randrange(256), fuzz.ATTACKER_KEY)
+        forger = fuzz_frames.encoder(rng.randrange(256), rng.randrange(256), fuzz_frames.ATTACKER_KEY)
         forger.signing.link_id = rng.randrange(256)
         frame = mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 3, 3).pack(forger)
         vehicle.feed(frame)
@@ -191,7 +192,7 @@ def test_forged_signed_frames_from_made_up_streams_keep_no_state():
 def test_vehicle_with_an_unknown_autopilot_enum_is_described_not_crashed():
     """Regression (found by the fuzzer): a HEARTBEAT with autopilot 255 made vehicle_description raise KeyError."""
     target = fuzz.RunnerTarget(None)
-    target.feed(mavlink.MAVLink_heartbeat_message(2, 255, 0, 0, 3, 3).pack(fuzz.encoder(1, 1)))
+    target.feed(mavlink.MAVLink_heartbeat_message(2, 255, 0, 0, 3, 3).pack(fuzz_frames.encoder(1, 1)))
     assert target.link.discovered
     assert target.link.vehicle_description() == "vehicle 1/1 (MAV_AUTOPILOT 255)"
     assert enum_name("MAV_RESULT", 200) == "MAV_RESULT 200"  # the runner names a refused command with it
