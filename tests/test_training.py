@@ -679,8 +679,8 @@ def test_a_checkpoint_written_before_the_sub_packages_still_resumes(tmp_path):
 
 
 @pytest.mark.parametrize("artifact, sweep_file, run", [
-    ("hrl-sac.pt", "comparison-v2-hrl-capped.sweep.yaml", "hrl-sac-default-seed0"),
-    ("sac.pt", "comparison-capped-sac.sweep.yaml", "sac-default-seed0")])
+    ("hrl-sac.pt", "hrl-sac.sweep.yaml", "hrl-sac-default-seed0"),
+    ("sac.pt", "sac.sweep.yaml", "sac-default-seed0")])
 def test_the_shipped_policies_are_the_sweep_file_runs_the_docs_name(artifact, sweep_file, run):
     # docs/training.md: `hrlsac train --sweep docs/results/SWEEP --run RUN` is the shipped policy's recipe; the
     # artifact's manifest carries the config it was trained with, which must be that run's, field for field.

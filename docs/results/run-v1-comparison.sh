@@ -3,12 +3,12 @@
 # searchers and every constant goal under HRL-SAC's low level, on the 1,000 test scenarios, at 1 km (the task) and
 # on the 2 km square (large-area.yaml), under the environment's rules and the mission runner's.
 # From the project root, with the venv's hrlsac on PATH, after training the two sweeps:
-#   hrlsac sweep docs/results/comparison-v2-hrl-capped.sweep.yaml     # HRL-SAC, seeds 0-4 -> runs/comparison-v2-hrl-capped
-#   hrlsac sweep docs/results/comparison-capped-sac.sweep.yaml         # flat SAC, seeds 0-4 -> runs/comparison-capped-sac
+#   hrlsac sweep docs/results/hrl-sac.sweep.yaml     # HRL-SAC, seeds 0-4 -> runs/hrl-sac
+#   hrlsac sweep docs/results/sac.sweep.yaml         # flat SAC, seeds 0-4 -> runs/sac
 # HRLDIR and SACDIR hold the run folders; OUT is the prefix of the four report folders.
 set -euo pipefail
-HRLDIR=${HRLDIR:-runs/comparison-v2-hrl-capped}
-SACDIR=${SACDIR:-runs/comparison-capped-sac}
+HRLDIR=${HRLDIR:-runs/hrl-sac}
+SACDIR=${SACDIR:-runs/sac}
 OUT=${OUT:-reports/v1}
 HRL=("$HRLDIR"/hrl-sac-default-seed{0,1,2,3,4})
 SAC=("$SACDIR"/sac-default-seed{0,1,2,3,4})

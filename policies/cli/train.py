@@ -3,7 +3,7 @@
 The settings come from the options (a preset plus ``--set`` overrides) or, with ``--sweep FILE --run NAME``, from
 one run of a sweep file: the config ``hrlsac sweep`` would train for that run, into the folder it would use, without
 Ray. That is how one run of a published comparison is trained again, e.g. the shipped HRL-SAC policy:
-``hrlsac train --sweep docs/results/comparison-v2-hrl-capped.sweep.yaml --run hrl-sac-default-seed0``.
+``hrlsac train --sweep docs/results/hrl-sac.sweep.yaml --run hrl-sac-default-seed0``.
 """
 from __future__ import annotations
 
