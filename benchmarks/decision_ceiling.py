@@ -182,14 +182,15 @@ def main() -> int:
     parser.add_argument("--thresholds", type=numbers, default=[],
                         help="comma-separated investigate_plausibility values to fly")
     parser.add_argument("--taus", type=numbers, default=[],
-                        help="comma-separated travel-time constants: the patterns become greedy Bayes with each (the "
-                        "best-of line then bounds choosing tau per scenario)")
+                        help="comma-separated travel-time constants: the patterns become greedy Bayes with each "
+                        "(the best-of line then bounds choosing tau per scenario)")
     parser.add_argument("--neighbourhoods", type=numbers, default=[],
-                        help="comma-separated neighbourhood sizes in cells: greedy Bayes scoring each cell by the belief "
-                        "within that many cells of it (a less myopic choice)")
+                        help="comma-separated neighbourhood sizes in cells: greedy Bayes scoring each cell by the "
+                        "belief within that many cells of it (a less myopic choice)")
     parser.add_argument("--rollouts", type=numbers, default=[],
                         help="comma-separated lookahead horizons (s): greedy Bayes choosing each next cell by "
-                        "rollouts in the belief (policies.env.baselines_v1.LookaheadBayes; greedy Bayes' tuned settings)")
+                        "rollouts in the belief (policies.env.baselines_v1.LookaheadBayes; greedy Bayes' tuned "
+                        "settings)")
     parser.add_argument("--rollout-options", type=int, default=6, help="cells each lookahead tries (default 6)")
     parser.add_argument("--identify-factor", type=float, default=None,
                         help="identification is detection at this share of the object's size (default: the task's, "
@@ -217,8 +218,10 @@ def main() -> int:
     oracle_skip = dataclasses.replace(greedy, investigate_plausibility=0.5)
     patterns = {
         "greedy_bayes": lambda core: GreedyBayes(core, greedy),
-        "greedy_bayes, travel_time_s 10": lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=10.0)),
-        "greedy_bayes, travel_time_s 100": lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=100.0)),
+        "greedy_bayes, travel_time_s 10":
+            lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=10.0)),
+        "greedy_bayes, travel_time_s 100":
+            lambda core: GreedyBayes(core, dataclasses.replace(greedy, travel_time_s=100.0)),
         "expanding_square": lambda core: ExpandingSquare(core, TUNED["expanding_square"]),
         "parallel_track": lambda core: ParallelTrack(core, TUNED["parallel_track"]),
     }
@@ -268,7 +271,8 @@ def main() -> int:
             mean, low, high = paired_scenario_bootstrap(success, greedy_success)
             report["results"][name]["minus_greedy_bayes"] = {"mean": mean, "scenario_bootstrap95": [low, high]}
             paired = f"  vs greedy Bayes {100 * mean:+.1f} [{100 * low:+.1f}, {100 * high:+.1f}]"
-        print(f"{name:34s} success {100 * metrics['success_rate']:5.1f} %  ran dry {100 * metrics['ran_dry_rate']:.1f} %"
+        print(f"{name:34s} success {100 * metrics['success_rate']:5.1f} %"
+              f"  ran dry {100 * metrics['ran_dry_rate']:.1f} %"
               f"  returned {100 * metrics['returned_rate']:.1f} %{paired}", flush=True)
     if args.no_patterns:
         write_report(args.out, report)

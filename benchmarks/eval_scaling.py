@@ -82,7 +82,8 @@ def main() -> int:
         run = args.run or train_checkpoint(os.path.join(scratch, "run"), args.train_steps)
         serial = evaluate_checkpoint(run, "test", args.episodes)
         pools = {"serial": PoolConfig(), "processes_2": PoolConfig(workers=2),
-                 "ray_1": PoolConfig(workers=1, ray_address="local"), "ray_2": PoolConfig(workers=2, ray_address="local")}
+                 "ray_1": PoolConfig(workers=1, ray_address="local"),
+                 "ray_2": PoolConfig(workers=2, ray_address="local")}
         for name in ("ray_1", "ray_2"):  # warm-up: Ray starts its worker processes once
             timed(run, args.episodes, pools[name], serial)
         runs: dict[str, list[float]] = {f"{name}_episodes_per_s": [] for name in pools}

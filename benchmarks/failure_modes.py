@@ -40,7 +40,8 @@ def failure_modes(per_episode: dict) -> dict[str, float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eval", nargs="*", default=[], help="evaluation files of hrlsac evaluate (eval_*.json)")
-    parser.add_argument("--scripted", nargs="*", default=[], help="scripted searchers to fly (policies.env.baselines_v1)")
+    parser.add_argument("--scripted", nargs="*", default=[],
+                        help="scripted searchers to fly (policies.env.baselines_v1)")
     parser.add_argument("--split", default="val", choices=["train", "val", "test"])
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--generator", default=None, help="generator config file (as hrlsac evaluate --generator)")

@@ -79,7 +79,8 @@ def main() -> int:
     for name, make in rows.items():
         result = fly(make, args.split, args.episodes)
         report["results"][name] = result
-        print(f"{name:42s} success {100 * result['success_rate']:5.1f} %  ran dry {100 * result['ran_dry_rate']:.1f} %  "
+        print(f"{name:42s} success {100 * result['success_rate']:5.1f} %  "
+              f"ran dry {100 * result['ran_dry_rate']:.1f} %  "
               f"returned {100 * result['returned_rate']:.1f} %", flush=True)
     write_report(args.out, report)
     return 0

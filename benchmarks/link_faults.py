@@ -1,13 +1,13 @@
 """Mission outcomes under link faults, on both autopilot personalities: completed, ended safely (with the
 reason), ditched or flyaway, over several seeds.
 
-Each condition is flown as a lockstep mission replay (``simulation.mission_replay``) against the simulated PX4 or ArduPilot
-Copter with the faults on the vehicle's end of the link, both directions, seeded by the run's seed; the outcome is
-judged from the simulator's ground truth (``simulation.flight_outcome``). "Completed" means the search ran to its own
-end and the vehicle landed and disarmed at home: a search that the runner resumed after the vehicle's link-loss
-failsafe counts, one that the outage ended does not. Outages start 10 s into the search (the search start of each
-seed's clean run). ArduPilot is flown twice for the outages: with its defaults (GUID_TIMEOUT stops it, the GCS
-failsafe off) and with the GCS failsafe on (FS_GCS_ENABLE 1, the companion as SYSID_MYGCS: it returns after 5 s).
+Each condition is flown as a lockstep mission replay (``simulation.mission_replay``) against the simulated PX4 or
+ArduPilot Copter with the faults on the vehicle's end of the link, both directions, seeded by the run's seed; the
+outcome is judged from the simulator's ground truth (``simulation.flight_outcome``). "Completed" means the search ran to
+its own end and the vehicle landed and disarmed at home: a search that the runner resumed after the vehicle's link-loss
+failsafe counts, one that the outage ended does not. Outages start 10 s into the search (the search start of each seed's
+clean run). ArduPilot is flown twice for the outages: with its defaults (GUID_TIMEOUT stops it, the GCS failsafe off)
+and with the GCS failsafe on (FS_GCS_ENABLE 1, the companion as SYSID_MYGCS: it returns after 5 s).
 
 Usage: python benchmarks/link_faults.py [--seeds 10] [--max-steps 60] [--autopilot px4|ardupilot|both]
 """

@@ -172,7 +172,8 @@ def main() -> int:
                                 f"{result['latency_us'][r][call]['wall']['p99']:<12.1f}" for r in RUNNERS)
                 print(f"  {call:12s} {bound[call]:9.1f} us{cells}")
             ref = result["reference_four_512x512_linear_us"]
-            print(f"  reference, four bare 512 x 512 F.linear at batch 1: p50 {ref['p50']:.1f} / p99 {ref['p99']:.1f} us")
+            print("  reference, four bare 512 x 512 F.linear at batch 1: "
+                  f"p50 {ref['p50']:.1f} / p99 {ref['p99']:.1f} us")
             if name == TARGET_PRESET:
                 verdict = {r: result["latency_us"][r]["combined"]["wall"]["p99"] <= TARGET_P99_US for r in RUNNERS}
                 report["meets_target"] = verdict

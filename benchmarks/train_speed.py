@@ -7,9 +7,10 @@ environment step, one environment, one torch thread, in the same run (the agents
 so a change of machine load hits all of them alike). The environment step is the same work for both, so the
 heavier it is, the closer the ratio comes to 1:
 
-  * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1, updates_per_step=1.0,
-               the preset's networks (LayerNorm after each hidden layer, no dropout), float32 updates: the default
-               preset as shipped (its update_dtype was bfloat16 until 2026-12-05; docs/training.md says why not now).
+  * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1,
+               updates_per_step=1.0, the preset's networks (LayerNorm after each hidden layer, no dropout), float32
+               updates: the default preset as shipped (its update_dtype was bfloat16 until 2026-12-05; docs/training.md
+               says why not now).
   * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
   * ours_bf16, ours_noln_bf16: the two above with ``TrainConfig.update_dtype="bfloat16"`` (the hidden layers'
                matrix products of each update in bfloat16 with CPU autocast's arithmetic; weights, Adam, outputs and
@@ -64,10 +65,11 @@ LABELS = {"ours": "ours (LayerNorm, float32)", "ours_noln": "ours (no LayerNorm 
 def our_config(hidden: tuple[int, ...], layer_norm: bool, num_envs: int, updates_per_step: float, warmup: int,
                steps: int, seed: int, update_dtype: str = "float32", task: str = "SarSearch-v1") -> TrainConfig:
     net = NetworkConfig(hidden=hidden, layer_norm=layer_norm, dropout=0.0)
-    return TrainConfig.from_preset("default", algo="sac", seed=seed, num_envs=num_envs, updates_per_step=updates_per_step,
-                              warmup_steps=warmup, total_steps=warmup + steps, batch_size=BATCH_SIZE,
-                              buffer_size=BUFFER_SIZE, actor=net, critic=net, checkpoint_every=10**9,
-                              log_every=10**9, torch_threads=1, update_dtype=update_dtype, task=task)
+    return TrainConfig.from_preset("default", algo="sac", seed=seed, num_envs=num_envs,
+                                   updates_per_step=updates_per_step, warmup_steps=warmup, total_steps=warmup + steps,
+                                   batch_size=BATCH_SIZE, buffer_size=BUFFER_SIZE, actor=net, critic=net,
+                                   checkpoint_every=10**9, log_every=10**9, torch_threads=1, update_dtype=update_dtype,
+                                   task=task)
 
 
 def time_ours(config: TrainConfig, warmup: int, steps: int) -> tuple[float, float]:
@@ -139,8 +141,9 @@ def main() -> int:
     steps = {"default": args.steps, "3x512": args.steps_3x512}
     steps = {name: max(8, steps[name] // 8 * 8) for name in presets}  # whole vector steps for ours_vec8
 
-    report: dict = {"agents": agents, "task": args.task, "warmup_steps": args.warmup, "timed_steps": steps, "repeats": args.repeats,
-                    "torch_threads": 1, "batch_size": BATCH_SIZE, "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
+    report: dict = {"agents": agents, "task": args.task, "warmup_steps": args.warmup, "timed_steps": steps,
+                    "repeats": args.repeats, "torch_threads": 1, "batch_size": BATCH_SIZE,
+                    "targets": {name: TARGETS[name] for name in presets}, "presets": {}}
     table = []
     for name in presets:
         hidden, n = PRESETS[name], steps[name]

@@ -52,6 +52,15 @@ def udp_ports() -> list[int]:
     return free_udp_ports(4)
 
 
+@pytest.fixture(scope="module")
+def policy():
+    """The shipped HRL-SAC artifact (policies/pretrained/hrl-sac.pt), loaded once per test module. A module that
+    flies another policy defines its own ``policy`` fixture, which takes precedence over this one."""
+    from autonomy.policy import load_policy
+
+    return load_policy("policies/pretrained/hrl-sac.pt")
+
+
 @pytest.fixture
 def pilot():
     """A lockstep pymavlink client of a simulated PX4 (seed 1) that has its GPS fix (sitl_bridge.scripted_flight)."""

@@ -3,7 +3,7 @@ from the simulated PX4 and ArduPilot over the in-memory link, the judgement, the
 from __future__ import annotations
 
 import pytest
-from test_runner_autopilots import events, fly, outbound, policy, states  # noqa: F401 - policy is a fixture
+from test_runner_autopilots import events, fly, outbound, states
 from test_runner import small_mission
 
 from autonomy.autopilot_fence import fence_conflicts, judge_autopilot_fence, read_fence

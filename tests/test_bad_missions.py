@@ -178,7 +178,8 @@ def test_any_finite_number_loads_or_names_a_field(tmp_path, path, value):
 
 
 @FUZZ
-@given(path=st.sampled_from(DEMO_PATHS), unknown=st.text(min_size=1, max_size=8).filter(str.strip).filter(str.isprintable))
+@given(path=st.sampled_from(DEMO_PATHS),
+       unknown=st.text(min_size=1, max_size=8).filter(str.strip).filter(str.isprintable))
 def test_an_unknown_key_is_named_by_its_path(tmp_path, path, unknown):
     document = copy.deepcopy(DEMO_DATA)
     container, _ = locate(document, path)

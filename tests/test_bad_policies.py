@@ -256,7 +256,8 @@ def test_other_files_passed_as_an_artifact(tmp_path, scripted, manifest_data):
         archive.writestr("notes.txt", "hello")
     cases = {
         other: "the torchscript program does not load (AttributeError",
-        plain: "not a policy artifact (no manifest.json inside; a plain TorchScript file, not written by 'hrlsac export')",
+        plain: "not a policy artifact (no manifest.json inside; a plain TorchScript file, "
+               "not written by 'hrlsac export')",
         checkpoint: "a torch.save file, e.g. a training checkpoint: write its policy with 'hrlsac export CHECKPOINT",
         empty: "not a policy artifact (not a zip archive",
         zipped_text: "not a policy artifact (no manifest.json inside",

@@ -56,8 +56,8 @@ def test_every_differing_setting_is_named():
 
 def test_with_the_flag_the_mission_flies_and_the_warning_names_the_difference(tmp_path, capsys):
     mission = demo_with(tmp_path, max_steps=80)
-    code = hrlsac_cli.main(["mission", "replay", mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"), "--no-video",
-                             "--quiet", "--accept-flight-mismatch"])
+    code = hrlsac_cli.main(["mission", "replay", mission, "--policy", PRETRAINED, "--out", str(tmp_path / "out"),
+                            "--no-video", "--quiet", "--accept-flight-mismatch"])
     assert code == 0
     err = capsys.readouterr().err
     assert (f"warning: {mission}: flying with flight settings the policy was not trained with "

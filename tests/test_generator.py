@@ -23,7 +23,8 @@ def test_same_seed_same_scenario_and_different_seeds_differ():
     config = GeneratorConfig(area_size_m=600.0, min_datum_distance_m=150.0, max_obstacles=6)
     assert generate_scenario(7, config) == generate_scenario(7, config)
     assert generate_scenario(7, config) != generate_scenario(7)
-    datums = {(s.datum_north_m, s.datum_east_m) for s in [generate_scenario(seed) for seed in scenario_seeds("val", 50)]}
+    scenarios = [generate_scenario(seed) for seed in scenario_seeds("val", 50)]
+    datums = {(s.datum_north_m, s.datum_east_m) for s in scenarios}
     assert len(datums) == 50
 
 

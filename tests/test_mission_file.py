@@ -516,8 +516,8 @@ def test_dataset_reference_with_the_real_loader(dataset_layout: Path, monkeypatc
 # ------------------------------------------------------------------------------------------- SarSearch-v1 fields
 
 def test_endurance_and_forecast_current_load_validate_and_round_trip(tmp_path: Path) -> None:
-    data = changed(scenario__endurance_s=750, scenario__current={"north_mps": 0.1, "east_mps": 0.0,
-                                                                 "forecast_north_mps": 0.15, "forecast_east_mps": -0.02})
+    current = {"north_mps": 0.1, "east_mps": 0.0, "forecast_north_mps": 0.15, "forecast_east_mps": -0.02}
+    data = changed(scenario__endurance_s=750, scenario__current=current)
     mission = load_mission(write(tmp_path, data))
     s = mission.scenario
     assert (s.endurance_s, s.forecast_current_north_mps, s.forecast_current_east_mps) == (750.0, 0.15, -0.02)

@@ -17,20 +17,14 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_link_faults import PilotAtTheGroundStation
 from test_runner import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
 
-from autonomy.policy import Policy, load_policy
+from autonomy.policy import Policy
 from missions.goals import TRACK_OBJECT
 from simulation import mission_replay as replay_module
 from simulation.mission_replay import airframe_for, replay_mission
 from sitl_bridge.faults import parse_link_faults
 from sitl_bridge.vehicle import VehicleConfig
 
-PRETRAINED = "policies/pretrained/hrl-sac.pt"
 ALL_STATES = ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]
-
-
-@pytest.fixture(scope="module")
-def policy() -> Policy:
-    return load_policy(PRETRAINED)
 
 
 def fly(policy: Policy, autopilot: str, tmp_path=None, faults: str = "", **vehicle) -> dict:
@@ -163,7 +157,10 @@ def test_the_autopilots_own_geofence_ends_the_search_and_is_never_resumed_over(p
     name = list(fence)[-1]
     params = {**fence, name: 0.0} if autopilot == "px4" else {**fence, name: 1000.0}  # wide at the preflight
     kind = mavlink.MAV_PARAM_TYPE_REAL32
-    tighten = (lambda gcs: gcs.param_set_encode(1, 1, name.encode(), fence[name], kind))
+
+    def tighten(gcs):
+        return gcs.param_set_encode(1, 1, name.encode(), fence[name], kind)
+
     monkeypatch.setattr(replay_module, "apply_faults",
                         lambda links, faults, clock, seed: [PilotAtTheGroundStation(links[0], clock, 30.0, tighten)])
     report = fly(outbound(policy), autopilot, params=params)
@@ -253,7 +250,10 @@ def test_a_geofence_failsafe_whose_text_was_lost_in_an_outage_is_still_not_resum
     vehicle's link-loss failsafe does not switch modes at all."""
     name = list(fence)[-1]
     params = {**fence, name: 0.0} if autopilot == "px4" else {**fence, name: 1000.0}
-    tighten = (lambda gcs: gcs.param_set_encode(1, 1, name.encode(), fence[name], mavlink.MAV_PARAM_TYPE_REAL32))
+
+    def tighten(gcs):
+        return gcs.param_set_encode(1, 1, name.encode(), fence[name], mavlink.MAV_PARAM_TYPE_REAL32)
+
     faulty = replay_module.apply_faults
     monkeypatch.setattr(replay_module, "apply_faults", lambda links, faults, clock, seed: [
         PilotAtTheGroundStation(faulty(links, faults, clock, seed)[0], clock, 30.0, tighten)])

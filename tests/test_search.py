@@ -367,6 +367,7 @@ def test_single_scenario_cover_path_matches_the_batched_path():
         single = start.copy()
         newly_single = cover(single, area, drone, half, intensity)
         pair = np.concatenate([start, start]).copy()
-        newly_pair = cover(pair, np.repeat(area, 2, 0), np.repeat(drone, 2, 0), np.repeat(half, 2), np.repeat(intensity, 2))
+        newly_pair = cover(pair, np.repeat(area, 2, 0), np.repeat(drone, 2, 0), np.repeat(half, 2),
+                           np.repeat(intensity, 2))
         np.testing.assert_array_equal(single[0], pair[0])
         assert newly_single[0] == newly_pair[0]

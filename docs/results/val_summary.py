@@ -1,6 +1,7 @@
 """Summarise sweeps' evaluations on a split (val: 500 scenarios, test: 1,000): per seed the success under the
-environment's and the mission runner's rules and the share that ran dry; for HRL-SAC also the sub-goal reachability, TrackObject at every
-decision and the scenarios only one of the two won; the means over seeds with their t 95 % intervals.
+environment's and the mission runner's rules and the share that ran dry; for HRL-SAC also the sub-goal reachability,
+TrackObject at every decision and the scenarios only one of the two won; the means over seeds with their t 95 %
+intervals.
 
 Each run needs ``hrlsac evaluate RUN --split SPLIT --episodes N`` with and without ``--flight-rules`` (the default
 file names), and HRL-SAC runs also ``--constant-goal TrackObject`` (``RUN/eval_SPLIT_goal-TrackObject.json``; on
