@@ -24,9 +24,10 @@ demo: $(STAMP)
 
 # One worker per core plus one (at most 4), whole test files per worker so that module fixtures are built once:
 # part of the suite waits on real time (UDP flights at 1x, subprocesses starting), and the extra worker fills that.
+# The files go out in collection order, the longest first (tests/conftest.py), not reordered by test count.
 WORKERS := $(shell $(PYTHON) -c "import os; print(min(4, (os.cpu_count() or 1) + 1))")
 test: lint
-	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile --no-loadscope-reorder
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
