@@ -1,16 +1,14 @@
 """Training speed: flat SAC environment steps per second with one gradient update per step, ours vs Stable-Baselines3.
 
-For each network preset both agents train on the same task (--task: SarSearch-v1 by default, the task every
-policy is trained on now; SarSearch-v0, the paper's, whose environment step is lighter, is what the figures before
-2026-12-04 measured), with the same flight settings and scenario split, one gradient update of batch 128 per
-environment step, one environment, one torch thread, in the same run (the agents take turns inside every repeat,
-so a change of machine load hits all of them alike). The environment step is the same work for both, so the
-heavier it is, the closer the ratio comes to 1:
+For each network preset both agents train on the same task (--task: SarSearch-v1 by default, the task every policy
+is trained on; SarSearch-v0, the paper's, has a lighter environment step), with the same flight settings and
+scenario split, one gradient update of batch 128 per environment step, one environment, one torch thread, in the
+same run (the agents take turns inside every repeat, so a change of machine load hits all of them alike). The
+environment step is the same work for both, so the heavier it is, the closer the ratio comes to 1:
 
   * ours:      policies.training.trainer.Trainer (what ``hrlsac train --algo sac`` runs), num_envs=1,
                updates_per_step=1.0, the preset's networks (LayerNorm after each hidden layer, no dropout), float32
-               updates: the default preset as shipped (its update_dtype was bfloat16 until 2026-12-05; docs/training.md
-               says why not now).
+               updates: the default preset as shipped (docs/training.md says why float32).
   * ours_noln: the same without LayerNorm -- exactly SB3's network shape (SB3's MlpPolicy has no LayerNorm).
   * ours_bf16, ours_noln_bf16: the two above with ``TrainConfig.update_dtype="bfloat16"`` (the hidden layers'
                matrix products of each update in bfloat16 with CPU autocast's arithmetic; weights, Adam, outputs and

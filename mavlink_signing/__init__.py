@@ -4,12 +4,12 @@ A package of its own at the bottom of the house, because both sides need it: ``s
 and ``autonomy`` (the companion computer, which must not import the simulator). It uses the standard library only;
 it works on raw frames and on pymavlink's parser by duck typing. ``hrlsac keygen`` is :mod:`.keygen_cli`.
 
-The signing spec (https://mavlink.io/en/guide/message_signing.html) in one paragraph: a signed MAVLink 2 frame
-sets bit 0 of ``incompat_flags`` and ends with 13 bytes: link id (1), timestamp (6, little-endian, units of
-10 microseconds since 2015-01-01 00:00 UTC) and the first 6 bytes of SHA-256(secret key + the frame up to and
-including the timestamp). A receiver keeps the last timestamp of each (link id, system, component) stream and
-rejects a frame whose timestamp is not newer; a new stream is accepted only if its timestamp is at most one
-minute behind the receiver's clock.
+The signing spec (https://mavlink.io/en/guide/message_signing.html) in one paragraph: a signed MAVLink 2 frame sets
+bit 0 of ``incompat_flags`` and ends with 13 bytes: link id (1), timestamp (6, little-endian, units of 10
+microseconds since the MAVLink epoch, 1 January 2015 00:00 UTC) and the first 6 bytes of SHA-256(secret key + the
+frame up to and including the timestamp). A receiver keeps the last timestamp of each (link id, system, component)
+stream and rejects a frame whose timestamp is not newer; a new stream is accepted only if its timestamp is at most
+one minute behind the receiver's clock.
 
 Key files hold the 32-byte secret as 64 hexadecimal characters on one line and must be private to their owner
 (like ssh keys): :func:`write_key_file` writes them so, :func:`load_key_file` refuses anything else.
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Callable
 
 KEY_BYTES = 32
-MAVLINK_EPOCH_UNIX_S = 1_420_070_400  # 2015-01-01 00:00:00 UTC
+MAVLINK_EPOCH_UNIX_S = 1_420_070_400  # 1 January 2015, 00:00:00 UTC
 TIMESTAMP_UNITS_PER_S = 100_000  # the signing timestamp counts 10-microsecond units
 NEW_STREAM_MAX_AGE = 60 * TIMESTAMP_UNITS_PER_S  # the spec's one minute
 SIGNATURE_LEN = 13  # link id + 6-byte timestamp + 6-byte signature

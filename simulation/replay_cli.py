@@ -29,8 +29,8 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
     parser.add_argument("--episodes", type=int, default=1, help="fly seeds SEED .. SEED+EPISODES-1")
     parser.add_argument("--no-video", action="store_true", help="skip replay.mp4 (faster)")
     parser.add_argument("--start-time", metavar="ISO8601", default=None,
-                        help="the date and time the tlog's timestamps count from, e.g. 2025-06-01T14:30:00Z (without a "
-                             "zone: UTC); default 2025-01-01T00:00:00Z, fixed so that a replay's files are the same "
+                        help="the date and time the tlog's timestamps count from, as YYYY-MM-DDTHH:MM:SSZ (without a "
+                             "zone: UTC); default the start of 2025 (UTC), fixed so that a replay's files are the same "
                              "on every run")
     add_pool_arguments(parser)
     parser.add_argument("--link-faults", metavar="SPEC", default=None,
@@ -69,7 +69,7 @@ def parse_start_time(text: str) -> datetime:
     if moment is not None and moment.tzinfo is None:
         moment = moment.replace(tzinfo=timezone.utc)
     if moment is None or moment < mission_replay.UNIX_EPOCH:
-        raise ValueError(f"--start-time must be an ISO 8601 date and time from 1970 on, e.g. 2025-06-01T14:30:00Z, "
+        raise ValueError(f"--start-time must be an ISO 8601 date and time from 1970 on, as YYYY-MM-DDTHH:MM:SSZ, "
                          f"got {text!r}")
     return moment
 

@@ -91,8 +91,8 @@ def test_px4_horizontal_breach_holds_where_it_was_detected_and_says_why():
 
 def test_px4_breach_during_a_reposition_stops_there_although_the_vehicle_is_already_in_hold():
     """MAVSDK's goto_location is DO_REPOSITION, which flies in Hold: the fence's Hold action changes no mode then,
-    and until 2026-12-07 the vehicle flew on to the target beyond the fence. Navigator::geofence_breach_check
-    repositions to the current position on a breach, whatever the mode."""
+    and a simulator that only switched modes would fly on to the target beyond the fence.
+    Navigator::geofence_breach_check repositions to the current position on a breach, whatever the mode."""
     pilot = px4_in_offboard({"GF_MAX_HOR_DIST": 60.0}, stream=(0.0, 0.0, 0.0, LOCAL_NED))
     lat, lon, _ = pilot.vehicle.frame.to_geodetic(150.0, 0.0, 0.0)
     pilot.mav.command_int_send(1, 1, mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_CMD_DO_REPOSITION, 0, 0,

@@ -323,8 +323,8 @@ def test_a_replay_tlog_is_dated_from_its_start_time(policy, mission_file, tmp_pa
 @pytest.mark.parametrize("change, message", [
     (("--policy", "missing.pt"), "missing.pt: no such file"),
     (("--episodes", "0"), "--episodes must be in [1, 100000], got 0"),
-    (("--start-time", "yesterday"), "--start-time must be an ISO 8601 date and time from 1970 on, e.g. "
-                                    "2025-06-01T14:30:00Z, got 'yesterday'"),
+    (("--start-time", "yesterday"), "--start-time must be an ISO 8601 date and time from 1970 on, as "
+                                    "YYYY-MM-DDTHH:MM:SSZ, got 'yesterday'"),
 ])
 def test_mission_command_turns_bad_input_into_one_line(policy, mission_file, change, message):
     args = {"--policy": str(policy.path), "--episodes": "1"}
