@@ -3,8 +3,8 @@ from the simulated PX4 and ArduPilot over the in-memory link, the judgement, the
 from __future__ import annotations
 
 import pytest
+from runner_helpers import small_mission
 from test_runner_autopilots import events, fly, outbound, states
-from test_runner import small_mission
 
 from autonomy.autopilot_fence import fence_conflicts, judge_autopilot_fence, read_fence
 from autonomy.preflight import judge_autopilot_settings

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pymavlink import mavutil
+from runner_helpers import small_mission
 from test_link_faults import PRETRAINED
-from test_runner import small_mission
 
 from autonomy.policy import load_policy
 from autonomy.recorder import PartialReport

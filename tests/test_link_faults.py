@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import free_udp_ports
 from pymavlink.dialects.v20 import common as mavlink
-from test_runner import searched_to_its_own_end, small_mission
+from runner_helpers import searched_to_its_own_end, small_mission
 
 import hrlsac_cli
 from autonomy.autopilots import ARDUPILOT_COPTER, PX4

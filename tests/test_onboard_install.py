@@ -15,7 +15,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from test_runner import ALL_STATES, fly_against_sitl_process
+from runner_helpers import ALL_STATES, fly_against_sitl_process
 from test_serial_flight import assert_flown_over_serial, fly_over_serial
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,7 +16,7 @@ import sys
 import pytest
 from conftest import UdpClient, free_udp_ports
 from pymavlink.dialects.v20 import common as mavlink
-from test_runner import ALL_STATES, policy, small_mission  # noqa: F401  (policy is a module fixture)
+from runner_helpers import ALL_STATES, policy, small_mission  # noqa: F401  (policy is a module fixture)
 
 import hrlsac_cli
 from autonomy.vehicle_link import VehicleLink

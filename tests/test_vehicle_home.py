@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from test_runner import read_tlog, small_mission
+from runner_helpers import read_tlog, small_mission
 
 from autonomy.policy import Policy, load_policy
 from missions.geodesy import GeoPoint, LocalFrame

@@ -1,101 +1,42 @@
 """The mission runner on whole replayed missions: the captured MAVLink bytes (tlog) of the setpoint stream and the
 companion heartbeat, the state machine, failsafes (slow, stalled and NaN policies, the geofence), determinism,
-and the ``hrlsac mission`` command.
+and the ``hrlsac mission replay`` command (its summary, progress, dated tlog and one-line errors; ``mission run``'s
+refusal of a bad connection URL).
 
 Every mission here is flown by the real runner against the simulated vehicle over the in-memory MAVLink link, in
-lockstep; the tlog is read back with pymavlink. Policies are real exported artifacts of a short training run;
-where a test needs a misbehaving policy it wraps the artifact's entry points (a fault injected into a real policy).
+lockstep; the tlog is read back with pymavlink. Policies are real exported artifacts of a short training run
+(runner_helpers.trained_policy); where a test needs a misbehaving policy it wraps the artifact's entry points (a
+fault injected into a real policy). The real-UDP flights are in test_runner_udp.py.
 """
 from __future__ import annotations
 
-import ast
-import dataclasses
-import inspect
 import json
 import math
 import os
 import re
-import signal
 import subprocess
 import sys
-import textwrap
-import time
-from datetime import datetime, timezone
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import free_udp_ports
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
+from runner_helpers import ALL_STATES, FLIGHT, HRLSAC, ours, read_tlog, small_mission, trained_policy, with_actions
 
-from autonomy.policy import Policy, load_policy
-from autonomy.vehicle_link import COMPANION_COMPONENT
-from missions.mission import FlightSettings, Mission
+from autonomy.policy import Policy
 from missions.mission_writer import save_mission
-from missions.scenario import Scenario, SearchArea, Target
-from policies.config import NetworkConfig, TrainConfig
-from policies.export.artifact import export_policy
-from policies.training.trainer import Trainer
-from simulation.mission_replay import DEFAULT_START_TIME, replay_mission, unix_microseconds
+from simulation.mission_replay import DEFAULT_START_TIME, replay_mission
 
-FLIGHT = FlightSettings(altitude_m=20.0, max_speed_mps=8.0, max_steps=40, subgoal_interval=10)
-NET = NetworkConfig(hidden=(32, 32))
+
 STREAM_PERIOD_US = 50_000  # 20 Hz
-ALL_STATES = ["CONNECT", "PREFLIGHT", "ARM", "TAKEOFF", "OFFBOARD", "SEARCH", "RTL", "LAND", "DONE"]
-
-
-def small_mission(**flight) -> Mission:
-    scenario = Scenario(area=SearchArea(-100.0, 500.0, -300.0, 300.0), datum_north_m=250.0, datum_east_m=0.0,
-                        datum_sigma_m=60.0, targets=(Target("person", 420.0, 150.0, primary=True),), name="small")
-    return Mission(scenario=scenario, flight=dataclasses.replace(FLIGHT, **flight), name="small")
 
 
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory) -> Policy:
-    """An HRL-SAC artifact from a few hundred training steps (the runner needs a real artifact, not a good one)."""
-    run = tmp_path_factory.mktemp("run")
-    config = TrainConfig.from_preset("default", algo="hrl-sac", seed=3, total_steps=300, num_envs=2,
-                                     warmup_steps=100, batch_size=32, meta_batch_size=8, buffer_size=1_000,
-                                     meta_buffer_size=200, checkpoint_every=10**6, log_every=10**6, eval_every=0,
-                                     actor=NET, critic=NET, meta_actor=NET, meta_critic=NET, flight=FLIGHT)
-    Trainer(config, run).run(progress=False)
-    artifact = load_policy(export_policy(run, run / "policy.pt").path)
-    # An untrained meta-controller may well choose ReturnToBase at once, which ends the search before these
-    # tests see it: the goal is fixed to TrackObject (the policy's own low level still flies every step).
-    return dataclasses.replace(artifact, _select_goal=lambda meta_obs: torch.full((meta_obs.shape[0],), 2))
-
-
-def with_actions(policy: Policy, act) -> Policy:
-    """The same artifact whose every-step entry point is replaced by ``act(obs_tensor) -> tensor``."""
-    return dataclasses.replace(policy, _act=act)
-
-
-LINK_OR_VEHICLE_ENDS = ("vehicle switched to", "telemetry lost", "vehicle disarmed", "policy stalled", "low battery")
-
-
-def searched_to_its_own_end(report: dict) -> bool:
-    """The search ended by its own logic (victim, step limit, back home...), not because of the link or the vehicle:
-    which of those depends on the policy, so tests of the flight side do not name it."""
-    return report["search_end"] is not None and not report["search_end"].startswith(LINK_OR_VEHICLE_ENDS)
-
-
-def read_tlog(path: Path, start_time: datetime = DEFAULT_START_TIME) -> list:
-    """Every message of a tlog, with ``_timestamp`` in seconds of the runner's clock (the tlog's stamps count from
-    the replay's ``start_time``)."""
-    log = mavutil.mavlink_connection(str(path), dialect="common")
-    start_s = unix_microseconds(start_time) / 1e6
-    messages = []
-    while (msg := log.recv_match()) is not None:
-        if msg.get_type() != "BAD_DATA":
-            msg._timestamp -= start_s
-            messages.append(msg)
-    return messages
-
-
-def ours(messages: list, kind: str) -> list:
-    return [m for m in messages if m.get_type() == kind and m.get_srcComponent() == COMPANION_COMPONENT]
+    """The short-trained HRL-SAC artifact the runner's test files share (runner_helpers.trained_policy)."""
+    return trained_policy(tmp_path_factory)
 
 
 def micros(msg) -> int:
@@ -250,9 +191,6 @@ def test_the_geofence_guard_turns_back_a_policy_flying_out_of_the_area(policy, t
 
 
 # ---------------------------------------------------------------------------------------- the command
-HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
-
-
 @pytest.fixture(scope="module")
 def mission_file(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("missions") / "small.yaml"
@@ -341,100 +279,3 @@ def test_mission_run_refuses_a_bad_connection_url(policy, mission_file):
                              "--connect", "udp:nowhere"], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.stderr
-
-
-VEHICLE_UP_FIRST_S = 5.0
-"""The real-UDP flights start the vehicle this long before the runner (and it says it booted 10 minutes earlier):
-the runner meets an autopilot whose clock is far ahead of its own, as on a real vehicle."""
-
-
-def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str = "px4", runner: list | None = None
-                             ) -> tuple[subprocess.CompletedProcess, str, dict]:
-    """A short mission flown by ``hrlsac mission run`` against ``hrlsac sitl`` as its own process (started
-    VEHICLE_UP_FIRST_S earlier, with PX4's or ArduPilot's own default stream rates), over real UDP in real time;
-    returns the command's result, the vehicle's log and the mission report. ``runner``: the ``hrlsac`` command
-    that flies (default: this checkout's)."""
-    mission = small_mission(altitude_m=10.0, max_steps=10)
-    path = tmp_path / "short.yaml"
-    save_mission(mission, path)
-    home = mission.scenario.home
-    api_port, api_remote = free_udp_ports(2)
-    personality = {"ardupilot": ["--autopilot", "ardupilot", "--tcp-port", "0", "--param", "RTL_ALT=1200"],
-                   "px4": ["--telemetry-profile", "px4", "--param", "RTL_RETURN_ALT=12"]}[autopilot]
-    sitl = subprocess.Popen([*HRLSAC, "sitl", "--api-port", str(api_port), "--api-remote", str(api_remote),
-                             "--gcs-remote", "0", "--home", f"{home.lat_deg},{home.lon_deg},{home.alt_m}",
-                             "--boot-time", "600", *personality],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        time.sleep(VEHICLE_UP_FIRST_S)
-        assert sitl.poll() is None, sitl.communicate()
-        result = subprocess.run([*(runner or HRLSAC), "mission", "run", str(path), "--policy", str(policy.path),
-                                 "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out"),
-                                 "--accept-flight-mismatch", *extra], capture_output=True, text=True, timeout=240)
-    finally:
-        sitl.send_signal(signal.SIGINT)
-        vehicle_log, _ = sitl.communicate(timeout=10)
-    assert result.returncode == 0, result.stdout + result.stderr
-    return result, vehicle_log, json.loads((tmp_path / "out" / "report.json").read_text())
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
-def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path, autopilot):
-    started = time.time()
-    _, _, report = fly_against_sitl_process(policy, tmp_path, autopilot=autopilot)
-    assert [t["to"] for t in report["transitions"]] == ALL_STATES
-    assert report["autopilot"] == {"px4": "PX4", "ardupilot": "ArduPilot Copter"}[autopilot]
-    assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
-    # The vehicle's clock is 600 s plus the head start ahead of the runner's: one time base all the same.
-    assert report["vehicle_time"]["offset_s"] < -600.0 - VEHICLE_UP_FIRST_S + 1.0
-    assert report["vehicle_time"]["timeline_changes"] == 0 and report["estimator"]["reinitialisations"] == 0
-    messages = read_tlog(tmp_path / "out" / "flight.tlog", datetime.fromtimestamp(0, timezone.utc))
-    setpoints = ours(messages, "SET_POSITION_TARGET_LOCAL_NED")
-    assert len(setpoints) >= 20 and {sp.type_mask for sp in setpoints} == {3527}
-    # A real flight's tlog is stamped with the wall clock (mavtogpx and log viewers date its points by it).
-    assert started - 1.0 < messages[0]._timestamp < messages[-1]._timestamp < time.time()
-
-
-@pytest.mark.slow
-@pytest.mark.mavsdk
-def test_mission_run_flies_the_same_mission_through_the_mavsdk_backend(policy, tmp_path):
-    """The same short mission, with MAVSDK (Action, Offboard.set_velocity_ned, Telemetry) as the client."""
-    pytest.importorskip("mavsdk.asyncio")
-    result, vehicle_log, report = fly_against_sitl_process(policy, tmp_path, "--backend", "mavsdk")
-    assert [t["to"] for t in report["transitions"]] == ALL_STATES and report["backend"] == "mavsdk"
-    assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20  # at least the 1.2 s lead
-    assert "mode OFFBOARD" in vehicle_log and "Task was destroyed" not in result.stderr
-    # the autopilot's fence parameters, read through MAVSDK's Param plugin (GF_ACTION an INT32, the others floats)
-    assert report["autopilot_fence"] == {"checked": True, "acts": False,
-                                         "description": "no limit set, on a breach: Hold"}
-
-
-def _assigned_attributes(cls) -> set[str]:
-    """The names a class assigns as ``self.NAME`` anywhere in its source."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    return {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-            and node.value.id == "self" and isinstance(node.ctx, ast.Store)}
-
-
-@pytest.mark.parametrize("backend", ["autonomy.vehicle_link.VehicleLink", "autonomy.mavsdk_link.MavsdkLink"])
-def test_both_backends_implement_the_vehicle_connection_the_runner_is_typed_with(backend):
-    """Every member of ``VehicleConnection`` is defined by the pymavlink and the MAVSDK client, each method taking
-    the protocol's parameters: the runner never asks which client it has."""
-    import importlib
-
-    from autonomy.vehicle_connection import VehicleConnection
-
-    module, name = backend.rsplit(".", 1)
-    cls = getattr(importlib.import_module(module), name)
-    members = {name for name in vars(VehicleConnection) if not name.startswith("_")}
-    defined = set(dir(cls)) | _assigned_attributes(cls)
-    if dataclasses.is_dataclass(cls):
-        defined |= {f.name for f in dataclasses.fields(cls)}
-    assert members - defined == set()
-    for member in members:
-        wanted = getattr(VehicleConnection, member)
-        if inspect.isfunction(wanted):
-            ours = list(inspect.signature(getattr(cls, member)).parameters)
-            assert list(inspect.signature(wanted).parameters) == ours[:len(inspect.signature(wanted).parameters)], \
-                member
