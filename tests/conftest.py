@@ -19,7 +19,8 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 import pytest  # noqa: E402
 
 LONGEST_FIRST = ("test_learning_sac.py", "test_learning.py", "test_scaling.py", "test_runner_udp.py",
-                 "test_runner_replay.py", "test_training.py", "test_onboard_install.py", "test_link_faults.py",
+                 "test_runner_replay.py", "test_training_evaluation.py", "test_training_resume.py",
+                 "test_training_meta.py", "test_training_rewards.py", "test_onboard_install.py", "test_link_faults.py",
                  "test_mavsdk_flight.py", "test_mavproxy_flight.py", "test_mavsdk_mission.py",
                  "test_decision_ceiling.py", "test_serial_flight.py", "test_export.py", "test_compare.py",
                  "test_pymavlink_udp_flight.py", "test_signing.py")
