@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 
 import pytest
+from ardupilot_helpers import ACCEPTED, ARM, FAILED, airborne, copter, texts
 from pymavlink.dialects.v20 import common as mavlink
-from test_ardupilot_vehicle import ACCEPTED, ARM, FAILED, airborne, copter, texts
 from test_px4_mission import fence_item, rally_point, square_fence, upload  # the same client side
 
 from sitl_bridge.ardupilot.modes import CopterMode

@@ -7,8 +7,8 @@ import math
 import struct
 
 import pytest
+from ardupilot_helpers import airborne
 from pymavlink.dialects.v20 import common as mavlink
-from test_ardupilot_vehicle import airborne
 
 from autonomy.vehicle_link import VehicleLink
 from sitl_bridge.ardupilot.fence import fence_names
