@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 import yaml
-from test_mission_file import BASE
+from mission_file_helpers import BASE
 
 from missions.fleet import MAX_VEHICLES, Fleet, FleetVehicle
 from missions.mission_file import MissionFileError, load_mission
