@@ -14,8 +14,8 @@ import math
 
 import pytest
 from ardupilot_helpers import ACCEPTED, ARM, FAILED, airborne, copter, texts
+from px4_mission_helpers import fence_item, rally_point, square_fence, upload  # the same client side
 from pymavlink.dialects.v20 import common as mavlink
-from test_px4_mission import fence_item, rally_point, square_fence, upload  # the same client side
 
 from sitl_bridge.ardupilot.modes import CopterMode
 from sitl_bridge.scripted_flight import LockstepPilot

@@ -236,7 +236,7 @@ def test_copter_fence_prearm_checks():
 def copter_with_uploaded_fence(params: dict, fence: list | None = None) -> LockstepPilot:
     """An ArduCopter on the ground with its GPS fix and ``fence(pilot)`` uploaded (by default a 40 m inclusion
     square)."""
-    from test_px4_mission import square_fence, upload  # here: test_px4_mission imports this module
+    from px4_mission_helpers import square_fence, upload
 
     pilot = LockstepPilot.create(VehicleConfig(autopilot="ardupilot", seed=5, params=params))
     pilot.wait_for(lambda: pilot.vehicle.autopilot.gps_ok, 2.0, "GPS")
@@ -273,7 +273,7 @@ def test_copter_uploaded_fence_needs_the_polygon_bit():
 
 
 def test_copter_uploaded_fence_prearm_checks():
-    from test_px4_mission import fence_item
+    from px4_mission_helpers import fence_item
 
     def circle(command: int, north: float, radius_m: float):
         return lambda pilot: [fence_item(pilot, 0, command, north, 0.0, radius_m)]
