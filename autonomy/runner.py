@@ -20,6 +20,8 @@ failsafe is recorded with its reason; :meth:`MissionRunner.run` returns the miss
 """
 from __future__ import annotations
 
+from typing import Iterator
+
 from autonomy.clocks import Clock, WallClock
 from autonomy.mission_report import mission_report
 from autonomy.mission_state import MissionState
@@ -35,20 +37,27 @@ class MissionRunner(SearchLoop, ReturnAndLand):
     """Flies one mission; see the module docstring. ``run()`` returns the mission report (a dict)."""
 
     def run(self) -> dict:
+        """Fly the mission on this runner's clock; returns the report."""
+        for _ in self.flight():
+            self.clock.advance()
+        return self.report()
+
+    def flight(self) -> Iterator[None]:
+        """The whole mission, yielding at every control tick: the driver moves the clock on in between (``run``,
+        or a loop that steps several runners on one clock)."""
         try:
-            self._connect()
-            self._preflight()
-            self._arm_and_take_off()
-            self._offboard()
-            self._search()
-            self._return_and_land("search ended: " + (self.search_end or "?"))
+            yield from self._connect()
+            yield from self._preflight()
+            yield from self._arm_and_take_off()
+            yield from self._offboard()
+            yield from self._search()
+            yield from self._return_and_land("search ended: " + (self.search_end or "?"))
         except MissionAborted as exc:
             self._event("abort", str(exc))
-            self._abort(str(exc))
+            yield from self._abort(str(exc))
         self.streamer.stop()
         if self.state != MissionState.DONE:
             self._record(MissionState.DONE, "mission over")
-        return self.report()
 
     def report(self) -> dict:
         """The mission report (``autonomy.mission_report``): also what a killed run leaves behind."""

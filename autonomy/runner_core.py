@@ -4,6 +4,8 @@ Time belongs to a :class:`Clock`: in lockstep replay it is the simulated vehicle
 vehicle one physics tick), against a real vehicle it is the wall clock (``advance`` sleeps one tick). Every
 tick the runner receives telemetry (into the Kalman filter), sends its heartbeat when due, lets the setpoint
 stream send when due and checks the failsafes; the states' waits are loops of ticks, so the stream never pauses.
+The states are generators that yield once per tick (``yield from self.tick()``): whoever drives them moves the
+clock on in between, one runner (``MissionRunner.run``) or several on one clock (a fleet).
 
 Commands go out as COMMAND_LONG with retries and count as done on the vehicle's acknowledgement, or, when the
 acknowledgement was lost, on what its heartbeat shows. Every transition and event is recorded with its time and
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Callable
+from typing import Callable, Iterator
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -89,9 +91,10 @@ class RunnerCore:
         self.say(f"[{now:8.2f} s] {kind}: {reason}")
 
     # ------------------------------------------------------------------ the loop
-    def tick(self) -> None:
-        """One control tick: telemetry in, heartbeat and setpoints out. States call it while they wait."""
-        self.clock.advance()
+    def tick(self) -> Iterator[None]:
+        """One control tick: yields while the clock moves on, then telemetry in, heartbeat and setpoints out.
+        States wait with ``yield from self.tick()``."""
+        yield
         messages = receive_telemetry(self.link, self.estimator, self.boot_time)
         now = self.clock.now()
         if any(msg.get_type() == "GLOBAL_POSITION_INT" for msg in messages):
@@ -119,7 +122,7 @@ class RunnerCore:
         return tuple(dict.fromkeys((*self._judged_params(), *companion_loss_params(self.flavour.name, read))))
 
     def wait_until(self, condition: Callable[[], bool], timeout_s: float, what: str,
-                   repeat: tuple[float, Callable[[], None]] | None = None) -> None:
+                   repeat: tuple[float, Callable[[], None]] | None = None) -> Iterator[None]:
         """Tick until ``condition()``; MissionAborted after ``timeout_s``. ``repeat``: (period, action) to run at
         the start and then every period while waiting (asking again for something that may have been lost)."""
         end = self.clock.now() + timeout_s
@@ -130,10 +133,10 @@ class RunnerCore:
             if repeat is not None and self.clock.now() + 1e-9 >= next_repeat:
                 repeat[1]()
                 next_repeat += repeat[0]
-            self.tick()
+            yield from self.tick()
 
     def command(self, command: int, *params: float, what: str, attempts: int | None = None,
-                took_effect: Callable[[], bool] | None = None) -> None:
+                took_effect: Callable[[], bool] | None = None) -> Iterator[None]:
         """COMMAND_LONG with retries (``attempts``, default ``command_retries``); raises MissionAborted unless
         the vehicle accepts it. ``took_effect``: what the vehicle's heartbeat shows once the command is carried
         out (armed, the new mode); it counts as acceptance when the ACK itself was lost on a lossy link."""
@@ -144,8 +147,8 @@ class RunnerCore:
             sent = self.clock.now()
             self.link.send_command(command, params, confirmation=min(attempt, 255))
             try:
-                self.wait_until(lambda: self.link.ack_for(command, sent) is not None or done(),
-                                self.config.command_timeout_s, f"{what}: no COMMAND_ACK for {name}")
+                yield from self.wait_until(lambda: self.link.ack_for(command, sent) is not None or done(),
+                                           self.config.command_timeout_s, f"{what}: no COMMAND_ACK for {name}")
             except MissionAborted:
                 continue
             ack = self.link.ack_for(command, sent)

@@ -14,6 +14,7 @@ failsafe (:mod:`autonomy.link_loss`): OFFBOARD is asked for again and the search
 from __future__ import annotations
 
 import math
+from typing import Iterator
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -30,7 +31,7 @@ from autonomy.takeoff_sequence import TakeoffSequence
 class SearchLoop(TakeoffSequence):
     """SEARCH, and its resumption through OFFBOARD; see the module docstring."""
 
-    def _search(self) -> None:
+    def _search(self) -> Iterator[None]:
         period = self.mission.flight.step_period_s
         next_decision = self.clock.now()
         while self.search_end is None:
@@ -52,15 +53,15 @@ class SearchLoop(TakeoffSequence):
                     next_decision = now + period
             decision = self.worker.poll(now)
             if decision is not None and self._blind(now) is None:
-                self._apply(decision, now)
-            self._check_failsafes(now)
+                yield from self._apply(decision, now)
+            yield from self._check_failsafes(now)
             if self.search_end is None:
-                self.tick()
+                yield from self.tick()
 
     def _blind(self, now: float) -> str | None:
         return blind_reason(now, self.link_loss, self.estimator, self.config.link_loss.gap_s)
 
-    def _apply(self, decision: Decision, now: float) -> None:
+    def _apply(self, decision: Decision, now: float) -> Iterator[None]:
         self.decisions.append(decision)
         self.on_decision(decision)
         if decision.end is not None:
@@ -72,8 +73,8 @@ class SearchLoop(TakeoffSequence):
             self.streamer.command(HOLD, now)
             self._event("failsafe", "policy returned a non-finite action: zero velocity, then RTL")
             # Stop first (the hold goes out for failsafe_hold_s), then return.
-            self.wait_until(lambda: self.clock.now() - now >= self.config.failsafe_hold_s,
-                            self.config.failsafe_hold_s + 1.0, "holding before RTL")
+            yield from self.wait_until(lambda: self.clock.now() - now >= self.config.failsafe_hold_s,
+                                       self.config.failsafe_hold_s + 1.0, "holding before RTL")
             self.search_end = "policy returned NaN"
             return
         self._last_decision_s = now
@@ -84,7 +85,7 @@ class SearchLoop(TakeoffSequence):
         self.streamer.command(VelocityCommand(vn, ve, self._altitude_hold()), now)
         self._set_zoom(decision.zoom)
 
-    def _check_failsafes(self, now: float) -> None:
+    def _check_failsafes(self, now: float) -> Iterator[None]:
         """Act on ``autonomy.failsafes.judge_search``: wait for lost telemetry (said once), end or resume."""
         if self.search_end is not None:
             return
@@ -106,12 +107,12 @@ class SearchLoop(TakeoffSequence):
         if verdict is None:
             return
         if verdict.action == "resume":
-            self._resume(verdict.mode, verdict.evidence)
+            yield from self._resume(verdict.mode, verdict.evidence)
         else:
             self._event("failsafe", verdict.message)
             self.search_end = verdict.search_end
 
-    def _resume(self, mode: str, evidence: str) -> None:
+    def _resume(self, mode: str, evidence: str) -> Iterator[None]:
         """After the vehicle's own link-loss failsafe: stream again, ask for the companion mode again and carry on
         searching from the same search state (the pilot keeps it)."""
         self.link_loss.resumptions += 1
@@ -124,7 +125,7 @@ class SearchLoop(TakeoffSequence):
         give_up = self.clock.now() + self.config.link_loss.wait_s
         while True:
             try:
-                self._offboard()
+                yield from self._offboard()
                 return
             except MissionAborted as exc:
                 if self.clock.now() + self.config.offboard_lead_s > give_up or \
