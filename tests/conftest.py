@@ -20,7 +20,8 @@ import pytest  # noqa: E402
 
 LONGEST_FIRST = ("test_learning_sac.py", "test_learning.py", "test_scaling.py", "test_runner_udp.py",
                  "test_runner_replay.py", "test_training_evaluation.py", "test_training_resume.py",
-                 "test_training_meta.py", "test_training_rewards.py", "test_onboard_install.py", "test_link_faults.py",
+                 "test_training_meta.py", "test_training_rewards.py", "test_onboard_install.py",
+                 "test_link_faults_outages.py", "test_link_faults_failsafes.py", "test_link_faults_model.py",
                  "test_mavsdk_flight.py", "test_mavproxy_flight.py", "test_mavsdk_mission.py",
                  "test_decision_ceiling.py", "test_serial_flight.py", "test_export_parity.py",
                  "test_export_manifest.py", "test_compare.py", "test_pymavlink_udp_flight.py", "test_signing.py")

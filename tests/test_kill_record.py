@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from link_faults_helpers import PRETRAINED
 from pymavlink import mavutil
 from runner_helpers import small_mission
-from test_link_faults import PRETRAINED
 
 from autonomy.policy import load_policy
 from autonomy.recorder import PartialReport

@@ -13,9 +13,9 @@ import math
 
 import pytest
 import torch
+from link_faults_helpers import PilotAtTheGroundStation
 from pymavlink.dialects.v20 import common as mavlink
 from runner_helpers import ours, read_tlog, searched_to_its_own_end, small_mission, with_actions
-from test_link_faults import PilotAtTheGroundStation
 
 from autonomy.policy import Policy
 from missions.goals import TRACK_OBJECT
