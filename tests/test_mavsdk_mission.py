@@ -29,7 +29,7 @@ from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPla
 from mavsdk.asyncio.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
-from test_mavsdk_flight import COMPANION_STREAMS, SPEED, T, autopilot_at, bounded, first, vehicle_server  # noqa: E402
+from mavsdk_helpers import COMPANION_STREAMS, SPEED, T, autopilot_at, bounded, first, vehicle_server  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.mavsdk]
 WAYPOINTS_NE = ((40.0, 0.0), (40.0, 50.0), (0.0, 50.0))
