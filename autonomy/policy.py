@@ -1,7 +1,7 @@
 """The on-board policy runtime: load an exported artifact, check it, and run its two entry points.
 
 A companion computer has the artifact and this package, not the training code: nothing here imports
-``policies`` (or gymnasium); tests/test_export.py loads and runs an artifact with ``policies`` hidden.
+``policies`` (or gymnasium); tests/test_export_parity.py loads and runs an artifact with ``policies`` hidden.
 
 Before any weight is loaded, :func:`load_policy` checks the file (a zip archive, complete, its SHA-256 seal
 intact: ``autonomy.artifact_seal``) and its manifest (a format version this runtime knows, the same observation
@@ -19,7 +19,7 @@ own numpy and torch arithmetic, the belief search's tiny probabilities included,
 turned it on itself finds it off). Observations carry denormal values (tiny belief probabilities), and on x86 every
 multiply with one takes a microcode assist, which makes the slowest decision steps several times slower
 (docs/export.md, "Latency"). A denormal is below any difference the networks resolve, so the
-actions are those of the trained networks (tests/test_export.py).
+actions are those of the trained networks (tests/test_export_parity.py).
 """
 from __future__ import annotations
 

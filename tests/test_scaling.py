@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 HRLSAC = [sys.executable, "-c", "import sys; from hrlsac_cli import main; sys.exit(main())"]
 PRETRAINED = ROOT / "policies" / "pretrained" / "hrl-sac.pt"
 NET = {"hidden": [32, 32]}
-# The smallest settings of tests/test_training.py: 800 steps, a checkpoint every 400.
+# The smallest settings of tests/training_helpers.py: 800 steps, a checkpoint every 400.
 SMALL = {"num_envs": 2, "warmup_steps": 200, "batch_size": 32, "meta_batch_size": 8, "buffer_size": 5_000,
          "meta_buffer_size": 1_000, "checkpoint_every": 400, "log_every": 100, "eval_every": 0,
          "updates_per_step": 0.5, "actor": NET, "critic": NET, "meta_actor": NET, "meta_critic": NET,

@@ -5,7 +5,7 @@ inside, so that the artifact needs no Python around it: the frozen observation n
 ``RunningMeanStd.normalize``, then float32), the networks without Dropout (identity in evaluation; removed,
 it cannot be switched back on by a ``.train()``), ``tanh`` squashing and the affine map to the action ranges.
 The operations are the eager ones in the same order, which is what makes the export agree with the eager
-policy to float32 rounding (tests/test_export.py).
+policy to float32 rounding (tests/test_export_parity.py).
 
     PolicyModule.act(obs: Tensor[N, 288]) -> Tensor[N, 4]          ActionHead (or Int8ActionHead)
     PolicyModule.select_goal(obs: Tensor[N, 284]) -> Tensor[N]     GoalHead (HRL-SAC) or NoGoal (flat SAC: -1)
