@@ -1,14 +1,13 @@
-"""Environment speed: steps per second, single and vectorised, on one core.
+"""Environment speed: steps per second, single and vectorised, on one core, for both task versions.
 
-Figures (median of --repeats runs, random actions, auto-resets included):
-  * single_raw_steps_per_s: SarSearchEnv().step, the default task (SarSearch-v1), no gymnasium wrappers
-  * single_make_steps_per_s: gymnasium.make("SarSearch-v0"), the paper's task, with gymnasium's checker/order
-    wrappers
-  * vector_steps_per_s: SarSearchVectorEnv with --num-envs environments of the default task (SarSearch-v1; scenario
-    pool warmed first)
+Figures (median of --repeats runs, random actions, auto-resets included), for SarSearch-v0 (the paper's task) and
+SarSearch-v1 (the default, whose step also advances the search belief):
+  * single_raw_steps_per_s_v0 / _v1: SarSearchEnv(task=...).step, no gymnasium wrappers
+  * single_make_steps_per_s: gymnasium.make("SarSearch-v0") with gymnasium's checker/order wrappers
+  * vector_steps_per_s_v0 / _v1: SarSearchVectorEnv with --num-envs environments (scenario pool warmed first)
   * reference_pendulum_steps_per_s: gymnasium's Pendulum-v1 in the same run, for comparing noisy runs
-Targets (set for SarSearch-v0's step, lighter than v1's belief search): >= 10,000 single and >= 200,000 vectorised
-steps/s.
+Targets (set for SarSearch-v0's step): >= 10,000 single and >= 200,000 vectorised steps/s; the v1 figures are
+printed beside them.
 
 Usage: python benchmarks/env_speed.py [--steps 20000] [--num-envs 1024] [--repeats 5]
 """
@@ -40,8 +39,8 @@ def single_steps_per_s(env, steps: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def vector_steps_per_s(num_envs: int, steps: int) -> float:
-    env = SarSearchVectorEnv(num_envs, SarSearchConfig(pool_size=2_000))
+def vector_steps_per_s(num_envs: int, steps: int, task: str) -> float:
+    env = SarSearchVectorEnv(num_envs, SarSearchConfig(pool_size=2_000, task=task))
     rng = np.random.default_rng(0)
     actions = rng.uniform([-1, -1, 0, 0], 1, size=(16, num_envs, 4)).astype(np.float32)
     env.reset(seed=0)
@@ -61,17 +60,20 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", default=results_file("env_speed.json"))
     args = parser.parse_args()
-    runs: dict[str, list[float]] = {"single_raw_steps_per_s": [], "single_make_steps_per_s": [],
-                                    "vector_steps_per_s": [], "reference_pendulum_steps_per_s": []}
+    runs: dict[str, list[float]] = {name: [] for name in (
+        "single_raw_steps_per_s_v0", "single_raw_steps_per_s_v1", "single_make_steps_per_s", "vector_steps_per_s_v0",
+        "vector_steps_per_s_v1", "reference_pendulum_steps_per_s")}
     for repeat in range(args.repeats):
         runs["reference_pendulum_steps_per_s"].append(single_steps_per_s(gymnasium.make("Pendulum-v1"), args.steps))
-        runs["single_raw_steps_per_s"].append(single_steps_per_s(SarSearchEnv(), args.steps))
+        for version in ("v0", "v1"):
+            task = f"SarSearch-{version}"
+            runs[f"single_raw_steps_per_s_{version}"].append(single_steps_per_s(SarSearchEnv(task=task), args.steps))
+            runs[f"vector_steps_per_s_{version}"].append(vector_steps_per_s(args.num_envs, args.steps * 20, task))
         runs["single_make_steps_per_s"].append(single_steps_per_s(gymnasium.make("SarSearch-v0"), args.steps))
-        runs["vector_steps_per_s"].append(vector_steps_per_s(args.num_envs, args.steps * 20))
         print(f"run {repeat + 1}/{args.repeats}: " + ", ".join(f"{k} {v[-1]:,.0f}" for k, v in runs.items()),
               flush=True)
     medians = summarise(runs, f"medians over {args.repeats} runs (one core, {args.num_envs} vectorised environments):")
-    for name, target in (("single_raw_steps_per_s", 10_000), ("vector_steps_per_s", 200_000)):
+    for name, target in (("single_raw_steps_per_s_v0", 10_000), ("vector_steps_per_s_v0", 200_000)):
         verdict = "meets" if medians[name] >= target else "MISSES"
         print(f"{name}: {verdict} the {target:,} target")
     write_report(args.out, {"num_envs": args.num_envs, "repeats": args.repeats, "medians": medians, "runs": runs})
