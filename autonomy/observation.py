@@ -32,8 +32,9 @@ Layout version 4 (SarSearch-v1, ``LAYOUT_V4``): the first 16 values as in versio
 =======================  ======  ====  =======================================================================
 name                     offset  size  meaning
 =======================  ======  ====  =======================================================================
-belief                   16      256   the search belief (``missions.belief``) summed over 2 x 2 blocks, over 4 x
-                                       the prior's peak cell: 1 where the prior was most likely, 0 once searched
+belief                   16      256   the search belief (``missions.belief``) as 16 x 16 block means (2 x 2 cells
+                                       of a 32 x 32 map, 4 x 4 of a 64 x 64 one) over the prior's peak cell: 1
+                                       where the prior was most likely, 0 once searched
 energy_left              272     1     share of the sortie's endurance left
 return_cost              273     1     time to fly home at full speed, as a share of the endurance
 belief_remaining         274     1     the belief's sum: the chance, to the crew, that the victim is still unseen

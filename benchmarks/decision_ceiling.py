@@ -56,7 +56,6 @@ from common import results_file, write_report
 
 import missions.search_state_v1
 from missions.search_state_v1 import TARGET_SLOTS
-from missions.coverage import GRID_SIZE
 from missions.generator import TASK_V1
 from missions.mission import FlightSettings
 from missions.scenario import CATEGORIES
@@ -99,8 +98,8 @@ class NeighbourhoodGreedy(GreedyBayes):
     def choose_cells(self, rows: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray:
         belief, k = self.core.belief[rows], self.cells
         score = self.greedy_score(box_sum(belief, k), self.travel_s(rows, north, east))
-        centre_i, centre_j = np.divmod(score.reshape(len(rows), -1).argmax(axis=1), GRID_SIZE)
-        cells = np.arange(GRID_SIZE)
+        centre_i, centre_j = np.divmod(score.reshape(len(rows), -1).argmax(axis=1), belief.shape[1])
+        cells = np.arange(belief.shape[1])
         inside = ((np.abs(cells[None, :, None] - centre_i[:, None, None]) <= k)
                   & (np.abs(cells[None, None, :] - centre_j[:, None, None]) <= k))
         return np.where(inside, belief, -1.0).reshape(len(rows), -1).argmax(axis=1)  # the region's best cell

@@ -112,15 +112,21 @@ def _cover_one(grid: np.ndarray, area: np.ndarray, drone_ne: np.ndarray, half_wi
 
 
 def downsample_coverage(coverage: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """(N, OBS_GRID * OBS_GRID) float32: means of 2 x 2 blocks, row-major with north rows first.
+    """(N, OBS_GRID * OBS_GRID) float32: means of square blocks (2 x 2 of the 32 x 32 grid; B x B of a finer grid
+    with B * OBS_GRID cells per side, such as the belief map of a larger area, ``missions.belief.map_cells``),
+    row-major with north rows first.
 
     ``out`` may be a preallocated (N, OBS_GRID, OBS_GRID) or (N, 256) float32 array to fill.
     """
-    n = coverage.shape[0]
-    rows = coverage[:, 0::2, :] + coverage[:, 1::2, :]  # (N, 16, 32): pairs of rows (contiguous runs)
+    n, side = coverage.shape[0], coverage.shape[1] // OBS_GRID
+    rows = coverage[:, 0::side, :] + coverage[:, 1::side, :]  # (N, 16, G): sums of runs of rows (strided adds)
+    for k in range(2, side):
+        rows += coverage[:, k::side, :]
     if out is None:
         out = np.empty((n, OBS_GRID * OBS_GRID), dtype=np.float32)
     blocks = out.reshape(n, OBS_GRID, OBS_GRID)
-    np.add(rows[:, :, 0::2], rows[:, :, 1::2], out=blocks)
-    blocks *= 0.25
+    np.add(rows[:, :, 0::side], rows[:, :, 1::side], out=blocks)
+    for k in range(2, side):
+        blocks += rows[:, :, k::side]
+    blocks *= 1.0 / (side * side)
     return out.reshape(n, OBS_GRID * OBS_GRID)

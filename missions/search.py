@@ -315,6 +315,39 @@ def detection_probability_from_factors(drone_ne: np.ndarray, target_ne: np.ndarr
     return p
 
 
+def cell_detection_probability(drone_ne: np.ndarray, north_low: np.ndarray, east_low: np.ndarray,
+                               cell_m: np.ndarray, size_m: np.ndarray, factor: np.ndarray,
+                               altitude_m: np.ndarray | float, zoom: np.ndarray | float,
+                               intensity: np.ndarray | float) -> np.ndarray:
+    """(N, R, C) the detection probability of :func:`detection_probability_from_factors` averaged over each cell of
+    a grid: an object of size ``size_m`` (N,) with condition factor ``factor`` (N,), equally likely anywhere in the
+    cell, is detected by this look with this probability. Cell (i, j) spans ``north_low[:, i]`` to ``north_low[:, i]
+    + cell_m[:, 0]`` and ``east_low[:, j]`` to ``east_low[:, j] + cell_m[:, 1]`` (north_low (N, R), east_low (N, C),
+    cell_m (N, 2), metres).
+
+    Exact, not sampled: inside the square footprint ``f_range = 1 - 0.5 (dn^2 + de^2) / h^2`` is a sum of a term in
+    dn and a term in de (and never below 0 there), so its integral over the part of the cell inside the footprint is
+    a product of interval lengths and cubes. Outside the footprint p is 0, so a cell the footprint misses keeps 0."""
+    altitude = np.reshape(altitude_m, (-1, 1))
+    zoom_factor = 1.0 + ZOOM_RANGE * np.reshape(zoom, (-1, 1))
+    half_width = altitude * (TAN_HALF_FOV / zoom_factor)  # (N, 1)
+
+    def along(low: np.ndarray, size: np.ndarray, drone: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per cell of one axis: the length of its part inside the footprint and the integral of d^2 over it."""
+        start = np.clip(low - drone[:, None], -half_width, half_width)
+        end = np.clip(low + size[:, None] - drone[:, None], -half_width, half_width)
+        return end - start, (end ** 3 - start ** 3) / 3.0
+
+    length_n, square_n = along(north_low, cell_m[:, 0], drone_ne[:, 0])
+    length_e, square_e = along(east_low, cell_m[:, 1], drone_ne[:, 1])
+    inverse = (-0.5 / (half_width * half_width))[:, :, None]
+    integral = length_n[:, :, None] * length_e[:, None, :] + inverse * (square_n[:, :, None] * length_e[:, None, :]
+                                                                         + length_n[:, :, None] * square_e[:, None, :])
+    f_res = 1.0 - np.exp(np.reshape(size_m, (-1, 1)) * (zoom_factor * -RESOLUTION_SCALE / altitude))  # (N, 1)
+    scale = f_res[:, 0] * np.reshape(factor, -1) * np.reshape(intensity, -1) / (cell_m[:, 0] * cell_m[:, 1])
+    return np.maximum(integral, 0.0) * scale[:, None, None]
+
+
 def detected_categories(detections: np.ndarray, category: np.ndarray) -> np.ndarray:
     """(N, 6) bool: whether an object of each category (CATEGORIES order) was detected."""
     found = np.zeros((detections.shape[0], NUM_CATEGORIES), dtype=bool)

@@ -96,13 +96,15 @@ class BeliefStepOutcome:
 
 
 class BeliefSearchState:
-    """N searches of SarSearch-v1; see the module docstring. ``scen`` is a padded ``search.ScenarioBatch``."""
+    """N searches of SarSearch-v1; see the module docstring. ``scen`` is a padded ``search.ScenarioBatch``;
+    ``map_cells`` the belief map's cells per side (``missions.belief.map_cells`` of the largest area these searches
+    will fly; by default of ``scen``'s areas): a batch whose scenarios are drawn later says it."""
 
-    def __init__(self, scen: search.ScenarioBatch, flight: FlightSettings):
+    def __init__(self, scen: search.ScenarioBatch, flight: FlightSettings, map_cells: int | None = None):
         self.scen, self.flight = scen, flight
         self.n = n = len(scen.datum)
         self.max_targets = t = scen.targets.shape[1]
-        g = search.GRID_SIZE
+        g = belief_logic.map_cells(scen.area) if map_cells is None else map_cells
         self.position, self.targets = np.zeros((n, 2)), np.zeros((n, t, 2))
         self.altitude, self.altitude_target, self.speed_mps = np.zeros(n), np.zeros(n), np.zeros(n)
         self.time_s, self.steps = np.zeros(n), np.zeros(n, dtype=np.int64)
@@ -140,7 +142,8 @@ class BeliefSearchState:
         self.speed_mps[indices] = self.time_s[indices] = self.blurred_s[indices] = 0.0
         self.steps[indices] = 0
         self.episode_seed[indices] = episode_seeds
-        self.belief[indices] = belief_logic.prior(scen.area[indices], scen.datum[indices], scen.datum_sigma[indices])
+        self.belief[indices] = belief_logic.prior(scen.area[indices], scen.datum[indices], scen.datum_sigma[indices],
+                                                  self.belief.shape[1])
         self.prior_peak[indices] = np.maximum(self.belief[indices].max(axis=(1, 2)), 1e-12)
         self.coverage[indices] = self.belief_offset[indices] = 0.0
         self.detections[indices] = False
@@ -280,9 +283,10 @@ class BeliefSearchState:
         new = sighted & ((self.status == NONE) | (self.status == LOST))
         self._new_candidate = new.any(axis=1)
         if new.any():  # how likely the sighting is the victim, to the crew: its cell's belief against the best one
-            cell = belief_logic.cell_size_m(scen.area)[:, None, :]
+            cells = self.belief.shape[1]
+            cell = belief_logic.cell_size_m(scen.area, cells)[:, None, :]
             water = self.targets - (scen.area[:, 0::2] + self.belief_offset)[:, None, :]
-            index = np.clip(np.floor(water / cell), 0, search.GRID_SIZE - 1).astype(np.int64)
+            index = np.clip(np.floor(water / cell), 0, cells - 1).astype(np.int64)
             at_sighting = self.belief[self._arange[:, None], index[..., 0], index[..., 1]]
             best = self.belief.max(axis=(1, 2))[:, None]
             ratio = np.divide(at_sighting, best, out=np.zeros_like(at_sighting), where=best > 0.0)
@@ -321,7 +325,7 @@ class BeliefSearchState:
             return
         sigma2 = belief_logic.FORECAST_SIGMA_MPS ** 2
         added_m2 = sigma2 * (self.time_s ** 2 - self.blurred_s ** 2) * due
-        cell = belief_logic.cell_size_m(self.scen.area)
+        cell = belief_logic.cell_size_m(self.scen.area, self.belief.shape[1])
         belief_logic.blur(self.belief, added_m2[:, None] / cell ** 2)
         self.blurred_s[due] = self.time_s[due]
 
@@ -347,5 +351,6 @@ class BeliefSearchState:
 
     @property
     def searched_cells(self) -> np.ndarray:
-        """(N,) the sum of the cells' cumulative probabilities of detection (what the coverage bonus counts)."""
-        return self.coverage.sum(axis=(1, 2))
+        """(N,) the sum of the cells' cumulative probabilities of detection (what the coverage bonus counts), in cells
+        of the default 32 x 32 grid (1/1024 of the area each) whatever the map's own cells."""
+        return self.coverage.sum(axis=(1, 2)) * (search.GRID_SIZE / self.coverage.shape[1]) ** 2

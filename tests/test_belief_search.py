@@ -60,20 +60,36 @@ def hover_until_sighted(state: BeliefSearchState, at, slot: int, steps: int = 10
 
 def test_prior_sums_to_one_and_peaks_in_the_datums_cell():
     area = np.array([[-50.0, 950.0, -500.0, 500.0]])
-    grid = belief.prior(area, np.array([[550.0, 80.0]]), np.array([80.0]))
+    grid = belief.prior(area, np.array([[550.0, 80.0]]), np.array([80.0]), GRID_SIZE)
     assert grid.sum() == pytest.approx(1.0)
     row, col = np.unravel_index(grid[0].argmax(), grid[0].shape)
     assert (row, col) == (int((550.0 + 50.0) // CELL_M), int((80.0 + 500.0) // CELL_M))
 
 
-def test_a_look_lowers_the_cell_under_the_drone_by_its_detection_probability():
+def test_the_prior_holds_each_cells_integral_and_the_edge_cells_what_lies_beyond():
+    area = np.array([[0.0, 1000.0, 0.0, 1000.0]])
+    datum, sigma = np.array([[60.0, 500.0]]), np.array([100.0])  # a datum near the south edge: a fifth lies beyond
+    grid = belief.prior(area, datum, sigma, GRID_SIZE)[0]
+
+    def normal_cdf(x):
+        return 0.5 * (1.0 + math.erf((x - 60.0) / (100.0 * math.sqrt(2.0))))
+
+    north = grid.sum(axis=1)  # the east part sums to one over the rows
+    assert north[5] == pytest.approx(normal_cdf(6 * CELL_M) - normal_cdf(5 * CELL_M), rel=1e-9)
+    assert north[0] == pytest.approx(normal_cdf(CELL_M), rel=1e-9)  # the first cell and everything south of it
+    assert grid.sum() == pytest.approx(1.0)
+
+
+def test_a_look_lowers_the_cell_under_the_drone_by_its_detection_probability_averaged_over_the_cell():
     state = state_for()
     row, col = 10, 20
     centre = np.array([-50.0 + (row + 0.5) * CELL_M, -500.0 + (col + 0.5) * CELL_M])
     before = state.belief[0, row, col]
     out = hover(state, centre, 1)[0]
-    # At the cell centre, straight below: f_range = 1; the person's resolution term at 50 m, zoom 0, calm clear day.
-    p = 0.98 * (1.0 - math.exp(-OBJECT_SIZE_M[0] * RESOLUTION_SCALE / 50.0))
+    # The whole cell (31.25 m) lies in the 70 m footprint: f_range averaged over a square of side c centred below
+    # the drone is 1 - 0.5 * (c^2 / 12 + c^2 / 12) / h^2; the person's resolution term at 50 m, zoom 0, calm clear day.
+    h = 50.0 * math.tan(math.radians(35.0))
+    p = 0.98 * (1.0 - math.exp(-OBJECT_SIZE_M[0] * RESOLUTION_SCALE / 50.0)) * (1.0 - CELL_M ** 2 / (12.0 * h ** 2))
     assert state.belief[0, row, col] == pytest.approx(before * (1.0 - p))
     assert state.coverage[0, row, col] == pytest.approx(p)
     assert out.belief_removed[0] > before * p  # the neighbouring cells of the 70 m footprint lost some too
@@ -237,188 +253,3 @@ def test_decision_events_ask_for_a_goal_at_once_and_a_decision_restarts_the_cloc
     far.set_goals(np.array([TRACK_OBJECT]))
     hover(far, (500.0, 0.0), 5, intensity=0.0)
     assert not far.decision_event[0]  # called once, not at every step below the reserve
-
-
-# ------------------------------------------------------------------------------------------ flight and training
-
-
-class ScriptedArtifact:
-    """A stand-in for a loaded artifact (``autonomy.policy.Policy``): TrackObject at every decision, flown
-    straight at the observation's target with the camera zoomed in a little."""
-
-    hierarchical, subgoal_interval = True, 30
-
-    def __init__(self, action_frame: str = "north_east"):
-        self.seen: list[np.ndarray] = []
-        self.action_frame = action_frame  # what an artifact's manifest carries in its training_config
-
-    def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
-        return np.full(meta_obs.shape[:-1], TRACK_OBJECT)
-
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        self.seen.append(np.array(obs))
-        offset = obs[..., 2:4]
-        speed = min(1.0, float(np.hypot(*offset)) / 0.5)
-        movement = [speed, 0.0] if self.action_frame != "north_east" else offset / max(float(np.hypot(*offset)), 0.5)
-        return np.concatenate([movement, [1.0, 0.3]]).astype(np.float32)
-
-
-@pytest.mark.parametrize("action_frame", ["north_east", "target", "arrive"])
-def test_the_pilot_sees_what_the_environment_sees_for_the_same_flight(action_frame):
-    from autonomy.search_pilot import SearchPilot
-    from missions.mission import Mission
-    from policies.env.core import SarSearchConfig
-    from policies.env.tasks import make_batch
-
-    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=700.0,
-                        targets=(Target("person", 330.0, 80.0, primary=True), Target("person", 250.0, 20.0),
-                                 Target("boat", 280.0, -60.0)), name="shared")
-    env = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True, action_frame=action_frame), [7])
-    artifact = ScriptedArtifact(action_frame)
-    pilot = SearchPilot(Mission(scenario=scenario), artifact, seed=7)
-    env_end = pilot_end = previous = None
-    straight_legs = 0
-    for step in range(400):
-        decision = pilot.decide(env.position[0].copy())
-        if env.goal_due(30)[0] and env_end is None:  # every 30 steps and at decision events, as the pilot
-            env.set_goals(np.array([TRACK_OBJECT]))
-        np.testing.assert_array_equal(artifact.seen[-1], env.obs[0])  # the same observation, value for value
-        if decision.end is not None:
-            pilot_end = decision.end
-            break
-        if decision.altitude_m is not None:  # a close look: the runner is asked for the close-look altitude
-            assert decision.altitude_m == CLOSE_LOOK_ALTITUDE_M and env.close_look()[0]
-        before = env.position[0].copy()
-        _, _, terminated, _, info = env.step(np.array([decision.action]))
-        # on a straight leg the environment flies the pilot's velocity command's direction
-        command, flown = np.array(decision.velocity_ne), env.position[0] - before
-        if previous is not None and np.hypot(*command) > 5.0 and np.hypot(*flown) > 5.0:
-            turn = np.dot(command, previous) / (np.hypot(*command) * np.hypot(*previous))
-            if turn > 0.999:
-                straight_legs += 1
-                assert np.dot(command, flown) / (np.hypot(*command) * np.hypot(*flown)) > 0.99  # within 8 degrees
-        previous = command
-        if terminated[0]:
-            env_end = "victim reached" if info["success"][0] else "another end"
-    assert env_end == pilot_end == "victim reached" and straight_legs > 10
-
-
-class GoalScript(ScriptedArtifact):
-    """ScriptedArtifact with a fixed sequence of goals, one per decision (the last one repeated)."""
-
-    def __init__(self, goals):
-        super().__init__("target")
-        self.goals, self.decisions = list(goals), 0
-
-    def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
-        goal = self.goals[min(self.decisions, len(self.goals) - 1)]
-        self.decisions += 1
-        return np.full(meta_obs.shape[:-1], goal)
-
-
-def test_return_to_base_ends_the_flown_search_only_once_the_drone_has_left_home():
-    """In training ReturnToBase at home is a hover until the next decision (the episode's "returned" needs the
-    drone to have been away); the pilot and the evaluation's flight rule read it the same way, and end the search
-    (the runner's RTL) only when it is chosen away from home."""
-    from autonomy.search_pilot import SearchPilot
-    from missions.goals import RETURN_TO_BASE
-    from missions.mission import Mission
-
-    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=700.0,
-                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-first")
-    pilot = SearchPilot(Mission(scenario=scenario), GoalScript([RETURN_TO_BASE, TRACK_OBJECT, RETURN_TO_BASE]), seed=7)
-    position, ends = np.zeros(2), []
-    for step in range(61):
-        decision = pilot.decide(position.copy())
-        ends.append(decision.end)
-        if decision.end is not None:
-            break
-        position = position + np.array(decision.velocity_ne) * 1.0  # flown exactly, 1 s per step
-        if step < 30:
-            assert np.hypot(*position) < 1.0  # ReturnToBase at home: a hover over home
-    assert ends[:60] == [None] * 60  # the first ReturnToBase (at home) did not end the search
-    assert ends[60] == "return to base" and np.hypot(*position) > 50.0  # the second, chosen away from home, did
-
-
-def fly_until_the_search_ends(pilot, max_steps: int):
-    """Fly the pilot's velocity commands exactly (1 s per step) from home; the decision that ended the search."""
-    position = np.zeros(2)
-    for _ in range(max_steps):
-        decision = pilot.decide(position.copy())
-        if decision.end is not None:
-            return decision
-        position = position + np.array(decision.velocity_ne) * 1.0
-    raise AssertionError(f"the search did not end within {max_steps} steps")
-
-
-def test_the_pilots_bingo_failsafe_ends_a_search_the_policy_would_not_end_in_time():
-    """A policy that keeps searching past its last chance to fly home: the pilot ends the search ("bingo
-    failsafe", the runner's RTL) once the way home would leave no more than BINGO_FAILSAFE_S of the endurance;
-    without the failsafe the same flight runs dry."""
-    from autonomy.search_pilot import BINGO_FAILSAFE_S, SearchPilot
-    from missions.mission import Mission
-
-    scenario = Scenario(area=AREA, datum_north_m=600.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=120.0,
-                        targets=(Target("person", 900.0, 400.0, primary=True),), name="far-out")
-    outcomes = {}
-    for failsafe in (BINGO_FAILSAFE_S, None):
-        pilot = SearchPilot(Mission(scenario=scenario), GoalScript([TRACK_OBJECT]), seed=7, bingo_failsafe_s=failsafe)
-        decision = fly_until_the_search_ends(pilot, 200)
-        outcomes[failsafe] = (decision.end, decision.step, float(pilot.state.bingo_margin_s[0]))
-    end, step, margin = outcomes[BINGO_FAILSAFE_S]
-    assert end == "bingo failsafe" and BINGO_FAILSAFE_S - 2.0 < margin <= BINGO_FAILSAFE_S
-    assert outcomes[None][0] == "endurance exhausted" and outcomes[None][1] > step
-
-
-def test_the_evaluations_flight_rule_reads_return_to_base_at_home_as_the_pilot_does():
-    from missions.goals import RETURN_TO_BASE
-    from policies.env.core import SarSearchConfig
-    from policies.env.tasks import make_batch
-    from policies.evaluation.episodes import run_episodes
-
-    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,
-                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
-    core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0, 1])
-    record = run_episodes(core, lambda c: np.zeros((c.n, 4), dtype=np.float32),
-                          lambda meta_obs: np.full(len(meta_obs), RETURN_TO_BASE), flight_rules=True)
-    # never away from home: a hover over home, until the pilot's bingo failsafe ends the search (not a sortie
-    # flown until its endurance is gone)
-    assert record["length"].tolist() == [190, 190] and not record["ran_dry"].any()
-
-
-def test_the_pilots_bingo_failsafe_also_ends_a_search_that_never_left_home():
-    """ReturnToBase at every decision from home never ends the search by itself (it is a hover until the next
-    decision); the failsafe ends it BINGO_FAILSAFE_S before the endurance is gone, not at 0 s."""
-    from autonomy.search_pilot import BINGO_FAILSAFE_S, SearchPilot
-    from missions.goals import RETURN_TO_BASE
-    from missions.mission import Mission
-
-    scenario = Scenario(area=AREA, datum_north_m=300.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=200.0,
-                        targets=(Target("person", 330.0, 80.0, primary=True),), name="home-only")
-    pilot = SearchPilot(Mission(scenario=scenario), GoalScript([RETURN_TO_BASE]), seed=7)
-    decision = fly_until_the_search_ends(pilot, 300)
-    assert decision.end == "bingo failsafe" and not pilot.state.left_home[0]
-    assert decision.step == 200 - BINGO_FAILSAFE_S and float(pilot.state.bingo_margin_s[0]) <= BINGO_FAILSAFE_S
-
-
-def test_the_evaluations_flight_rules_end_a_search_at_the_pilots_bingo_failsafe():
-    """The same policy, flown out and kept searching: training's rules let the sortie run dry, the flight rules
-    end it where the pilot's failsafe would (at most BINGO_FAILSAFE_S of the way home's margin left)."""
-    from autonomy.search_pilot import BINGO_FAILSAFE_S
-    from policies.env.core import SarSearchConfig
-    from policies.env.tasks import make_batch
-    from policies.evaluation.episodes import run_episodes
-
-    scenario = Scenario(area=AREA, datum_north_m=600.0, datum_east_m=50.0, datum_sigma_m=60.0, endurance_s=120.0,
-                        targets=(Target("person", 900.0, 400.0, primary=True),), name="far-out")
-    north = np.array([1.0, 0.0, 1.0, 0.0], dtype=np.float32)  # straight north, sensor on
-    lengths, ran_dry = {}, {}
-    for rules in (False, True):
-        core = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=True), [0])
-        record = run_episodes(core, lambda c: np.tile(north, (c.n, 1)),
-                              lambda meta_obs: np.full(len(meta_obs), TRACK_OBJECT), flight_rules=rules)
-        lengths[rules], ran_dry[rules] = int(record["length"][0]), bool(record["ran_dry"][0])
-    assert ran_dry[False] and lengths[False] == 120
-    assert not ran_dry[True] and lengths[True] < 120
-    # ended on the step the margin fell to BINGO_FAILSAFE_S: 10 m/s north from home, so home is t * 10 m away
-    assert abs(lengths[True] - (120.0 - BINGO_FAILSAFE_S) / 2.0) <= 2.0

@@ -72,7 +72,7 @@ class LookaheadBayes(GreedyBayes):
         """(R, M) belief each option's rollout removes within the horizon, flying to the option's cell first and
         then on greedily (a cell kept until reached or searched down to half), while it could still come home."""
         core, flight, scen = self.core, self.core.flight, self.core.scen
-        grid, m = search.GRID_SIZE, options.shape[1]
+        grid, m = core.belief.shape[1], options.shape[1]
         rep = np.repeat(rows, m)
         n, index = len(rep), np.arange(len(rep))
         belief, searched = core.belief[rep].copy(), np.zeros((n, grid, grid))

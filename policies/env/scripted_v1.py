@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from missions import goals as goal_logic
-from missions import search
 from missions.action_frames import arrival_speed_fraction
 from missions.sweep_width import sweep_width_m
 from missions.validation import check_fields
@@ -123,7 +122,7 @@ class GreedyBayes(ScriptedSearch):
 
     def search_point(self, fresh: np.ndarray) -> np.ndarray:
         core, flight = self.core, self.core.flight
-        n, grid = core.n, search.GRID_SIZE
+        n, grid = core.n, core.belief.shape[1]
         north, east = goal_logic.cell_centres(core.scen.area, grid)
         north, east = north + core.belief_offset[:, 0:1], east + core.belief_offset[:, 1:2]
         flat = core.belief.reshape(n, -1)

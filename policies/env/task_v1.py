@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from autonomy.observation import LAYOUT_V4
+from missions import belief
 from missions.search_state_v1 import CONFIRMED, RETURN_RESERVE, BeliefSearchState
 from policies.env.core import REWARD_BOUNDARY, REWARD_COLLISION, REWARD_TARGET, FlownSearch, SarSearchConfig
 
@@ -41,7 +42,12 @@ class AmbiguousSearchBatch(FlownSearch, BeliefSearchState):
     step_reward = 0.0
 
     def __init__(self, config: SarSearchConfig, num_envs: int):
-        BeliefSearchState.__init__(self, self._placeholder(config, num_envs), config.flight)
+        areas = ([scenario.area for scenario in config.scenarios] if config.scenarios
+                 else [config.scenario_distribution.area()])
+        sides = np.array([(a.north_min_m, a.north_max_m, a.east_min_m, a.east_max_m) for a in areas])
+        # the map's cells are sized for the largest area the batch will fly (its scenarios are drawn later)
+        BeliefSearchState.__init__(self, self._placeholder(config, num_envs), config.flight,
+                                   map_cells=belief.map_cells(sides))
         self._setup_vehicles(self.layout.dim)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
