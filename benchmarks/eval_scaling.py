@@ -31,7 +31,7 @@ from policies.config import TrainConfig
 from policies.evaluation.parallel import evaluate_checkpoint
 from policies.evaluation.parallel import quick_evaluation
 from policies.training.trainer import Trainer
-from simulation.worker_pool import PoolConfig, run_tasks
+from simulation.worker_pool import PoolConfig, run_tasks, start_local_ray
 
 MACHINE_NOTE = "2 cores, shared with other jobs (parallel efficiency is bounded by what the other jobs leave free)"
 
@@ -77,7 +77,7 @@ def main() -> int:
     import ray
 
     load_before = os.getloadavg()[0]
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    start_local_ray(num_cpus=2)
     with tempfile.TemporaryDirectory() as scratch:
         run = args.run or train_checkpoint(os.path.join(scratch, "run"), args.train_steps)
         serial = evaluate_checkpoint(run, "test", args.episodes)

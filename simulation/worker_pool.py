@@ -138,6 +138,23 @@ def _run_on_processes(fn, tasks: list, workers: int, on_done) -> list:
     return results
 
 
+RAY_WORKER_NICENESS = "0"
+"""Niceness of the workers of a Ray instance started here (``RAY_worker_niceness``, unless the environment sets it).
+Ray's own default, 15, suits nodes that do nothing else; on a shared workstation its workers then get a few percent
+of a core beside any busy process, and a sweep or a parallel evaluation crawls while the machine looks idle."""
+
+
+def start_local_ray(**options):
+    """Start a Ray instance in this process with its workers at ``RAY_WORKER_NICENESS`` and no usage stats
+    (offline machines); ``options`` go to ``ray.init`` (``num_cpus``...). Returns the ``ray`` module."""
+    import ray
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no usage-stats prompt or upload
+    os.environ.setdefault("RAY_worker_niceness", RAY_WORKER_NICENESS)
+    ray.init(include_dashboard=False, log_to_driver=False, **options)
+    return ray
+
+
 def connect_ray(address: str):
     """The ``ray`` module, initialised: reused if this process already joined a Ray instance, else started
     locally (``"local"``) or connected to ``address``. Raises :class:`WorkerPoolError` with a one-line reason."""
@@ -147,11 +164,11 @@ def connect_ray(address: str):
         raise WorkerPoolError(f"--ray needs Ray, which is not installed: {RAY_EXTRA}") from None
     if ray.is_initialized():
         return ray
-    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no usage-stats prompt or upload (offline machines)
     try:
         if address == "local":
-            ray.init(include_dashboard=False, log_to_driver=False)
+            start_local_ray()
         else:
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no usage-stats prompt or upload
             ray.init(address=address, log_to_driver=False)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -32,7 +32,7 @@ from policies.reports.sweep_table import DONE, FAILED, SKIPPED, ProgressTable, R
 from policies.training.sweep import SWEEP_REPORT, check_run_folders, run_sweep
 from policies.training.sweep_config import SweepFileError, load_sweep, sweep_from_dict
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
-from simulation.worker_pool import PoolConfig, contiguous_chunks, run_tasks
+from simulation.worker_pool import PoolConfig, contiguous_chunks, run_tasks, start_local_ray
 
 ray = pytest.importorskip("ray")
 
@@ -52,7 +52,7 @@ KILLED = "hrl-sac-default-seed3"
 @pytest.fixture(scope="module")
 def ray_instance():
     """One local Ray instance with 2 CPUs for every test of this module."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    start_local_ray(num_cpus=2)
     yield ray
     ray.shutdown()
 
