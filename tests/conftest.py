@@ -24,7 +24,7 @@ LONGEST_FIRST = ("test_learning_sac.py", "test_learning.py", "test_scaling.py", 
                  "test_link_faults_outages.py", "test_link_faults_failsafes.py", "test_link_faults_model.py",
                  "test_mavsdk_offboard.py", "test_mavsdk_actions.py", "test_mavsdk_runner_link.py",
                  "test_mavproxy_flight.py", "test_mavsdk_mission.py", "test_decision_ceiling.py",
-                 "test_serial_flight.py", "test_export_parity.py", "test_export_manifest.py", "test_compare.py",
+                 "test_export_parity.py", "test_export_manifest.py", "test_compare.py",
                  "test_pymavlink_udp_flight.py", "test_signing.py")
 """The test files that take longest, longest first (from ``pytest --durations=0``). ``make test`` hands whole files
 to its workers in collection order (``--dist loadfile --no-loadscope-reorder``): started first, the long files run

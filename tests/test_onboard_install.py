@@ -11,11 +11,9 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 
-from runner_helpers import ALL_STATES, fly_against_sitl_process
 from test_serial_flight import assert_flown_over_serial, fly_over_serial
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,15 +71,9 @@ def test_a_workstation_command_names_the_extra_it_needs(onboard, command):
     assert len(result.stderr.strip().splitlines()) == 1
 
 
-def test_the_onboard_install_flies_a_mission_against_the_simulated_vehicle(onboard, tmp_path):
-    """``hrlsac mission run`` of the on-board install against ``hrlsac sitl`` of this checkout, over real UDP."""
-    _, _, report = fly_against_sitl_process(SimpleNamespace(path=PRETRAINED), tmp_path,
-                                            runner=[str(onboard / "hrlsac")])
-    assert [t["to"] for t in report["transitions"]] == ALL_STATES
-    assert report["estimator"]["accepted"] > 100 and report["setpoints_sent"] >= 20
-
-
 def test_the_onboard_install_flies_a_mission_over_a_serial_line(onboard, tmp_path):
-    """``--connect serial:...`` needs pyserial (pymavlink imports it for a serial connection): a base dependency,
-    so the on-board install flies over a serial line (here a pseudo-terminal to the simulated vehicle)."""
+    """``hrlsac mission run`` of the on-board install against this checkout's simulated vehicle, over a serial line
+    (a pseudo-terminal): ``--connect serial:...`` needs pyserial (pymavlink imports it for a serial connection), a
+    base dependency. The whole mission, as tests/test_serial_flight.py checks it; the runner over real UDP is
+    tests/test_runner_udp.py's."""
     assert_flown_over_serial(*fly_over_serial(tmp_path, runner=[str(onboard / "hrlsac")]))

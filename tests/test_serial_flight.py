@@ -3,7 +3,9 @@ vehicle on the master end of a pseudo-terminal pair (``sitl_bridge.serial_link``
 
 The vehicle hears the companion through the same serial line: what it received is parsed on its side, so the test
 sees the arming, OFFBOARD and the setpoint stream as the autopilot got them, not only as the runner sent them.
-``fly_over_serial`` is also what the on-board install flies (tests/test_onboard_install.py).
+The whole mission (``fly_over_serial``, checked by ``assert_flown_over_serial``) is flown by the on-board install
+(tests/test_onboard_install.py): the same runner, installed as a user installs it on a companion computer. This file
+checks the pieces: the pseudo-terminal the simulated vehicle serves, and its serial link.
 """
 from __future__ import annotations
 
@@ -115,10 +117,6 @@ def assert_flown_over_serial(report: dict, heard: HeardLink, events: list[str], 
     # 20 Hz from the runner's stream, as the vehicle's clock saw them arrive; never the gap PX4 leaves OFFBOARD on
     assert (len(times) - 1) / (times[-1] - times[0]) > 15.0
     assert max(b - a for a, b in zip(times, times[1:])) < OFFBOARD_LOSS_S
-
-
-def test_a_mission_flies_over_a_serial_line(tmp_path):
-    assert_flown_over_serial(*fly_over_serial(tmp_path))
 
 
 def test_hrlsac_sitl_serves_a_pseudo_terminal_and_prints_its_path():
