@@ -124,3 +124,14 @@ def cycles(modules: set[str]) -> list[list[str]]:
 @pytest.mark.parametrize("package", PACKAGES)
 def test_no_module_imports_in_a_circle(package):
     assert cycles({m for m in MODULES if m.split(".")[0] == package}) == []
+
+
+MODULE_LINE_LIMIT = 400
+"""The house rule: a module is small enough to read in one sitting (docs/architecture.md)."""
+
+
+def test_no_module_is_longer_than_the_limit():
+    tops = (*PACKAGES, "benchmarks", "tests", "docs")
+    long = {str(path.relative_to(ROOT)): length for top in tops for path in (ROOT / top).rglob("*.py")
+            if (length := len(path.read_text().splitlines())) > MODULE_LINE_LIMIT}
+    assert long == {}, f"split these modules by concern: {long}"
