@@ -46,6 +46,9 @@ def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argpar
 
     try:
         mission = load_mission(args.mission)
+        if mission.fleet is not None:
+            raise ValueError(f"{args.mission}: fleet: {len(mission.fleet.vehicles)} drones; this command flies one "
+                             "drone: remove the fleet section to fly the scenario with one")
         policy = load_policy(args.policy)
         if not 0 <= args.seed <= 2**32 - 1:  # numpy seeds the sensors and the camera with it
             raise ValueError(f"--seed must be in [0, {2**32 - 1}], got {args.seed}")

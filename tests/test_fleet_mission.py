@@ -1,8 +1,11 @@
 """Fleet mission files (``missions/fleet.py``): launch points listed or on a launch line, system ids, separation and
-altitude layers, the one-line errors, and the round trip through the writer."""
+altitude layers, the one-line errors, the round trip through the writer, the shipped fleet demo, and the
+single-drone mission commands refusing a fleet file."""
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -103,3 +106,23 @@ def test_a_fleet_round_trips_through_the_writer_as_a_list_of_vehicles(tmp_path):
     written = yaml.safe_load((tmp_path / "copy.yaml").read_text())["fleet"]
     assert [v["system_id"] for v in written["vehicles"]] == [1, 2] and "launch_line" not in written
     assert load_mission(tmp_path / "copy.yaml") == mission
+
+
+def test_the_shipped_fleet_demo_is_three_drones_on_a_launch_line():
+    mission = load_mission(Path(__file__).resolve().parents[1] / "missions" / "library" / "fleet-demo.yaml")
+    fleet = mission.fleet
+    assert [(v.name, v.system_id) for v in fleet.vehicles] == [("drone1", 1), ("drone2", 2), ("drone3", 3)]
+    assert [(round(v.north_m, 6), round(v.east_m, 6)) for v in fleet.vehicles] == [(0, 0), (0, 40), (0, 80)]
+    assert fleet.separation_m == 30 and fleet.altitude_layer_m == 10
+
+
+@pytest.mark.parametrize("command", ["run", "replay"])
+def test_the_single_drone_mission_commands_refuse_a_fleet_file_in_one_line(command):
+    demo = Path(__file__).resolve().parents[1] / "missions" / "library" / "fleet-demo.yaml"
+    extra = ["--connect", "udpin:127.0.0.1:0"] if command == "run" else []
+    result = subprocess.run([sys.executable, "-m", "hrlsac_cli", "mission", command, str(demo), "--policy",
+                             "policies/pretrained/hrl-sac.pt", *extra], capture_output=True, text=True, timeout=120,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.strip() == (f"hrlsac mission {command}: error: {demo}: fleet: 3 drones; this command flies "
+                                     "one drone: remove the fleet section to fly the scenario with one")
