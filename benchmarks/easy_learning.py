@@ -7,10 +7,9 @@ prints each run's deterministic success before and after training on the test's 
 many runs gained the +20 points of success the test asks for and how many pass all of its checks
 (``learning_checks`` in the test: success, reward and the training episodes' own success).
 
-Each run is one process-independent Trainer on one torch thread (about 70-110 s at 16,000 / 20,000 steps here);
-``--workers`` runs that many at once. The oneDNN kernels, and so the bfloat16 bits, depend on the CPU (AMX or
-AVX-512 BF16; ``ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16`` forces the latter on an AMX machine), so the report
-records which the machine offers.
+Each run is one process-independent Trainer on one torch thread; ``--workers`` runs that many at once. The oneDNN
+kernels, and so the bfloat16 bits, depend on the CPU (AMX or AVX-512 BF16; ``ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16``
+forces the latter on an AMX machine), so the report records which the machine offers.
 
 ``--first-layer-float32`` is an experiment, not a feature: it patches ``networks.UpdateWeights.hidden`` (and the
 critics' bfloat16 first-layer shortcut) so that in bfloat16 updates the first Linear layer of every network runs in

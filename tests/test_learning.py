@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from easy_missions import check_learns
 
-# slow; about 90 s each here, but a CI run on a slower 2-core machine once took over 300 s (the suite default)
+# slow: on a slow, shared 2-core machine a training run can outlast the suite's default timeout (300 s)
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
 

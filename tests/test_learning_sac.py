@@ -1,7 +1,7 @@
 """Flat SAC measurably beats its untrained self on an easy mission: tests/easy_missions.py's check (the task,
 budget and what "learned" means), in a file apart from HRL-SAC's (tests/test_learning.py) so that pytest-xdist's
-``--dist loadfile`` (the Makefile's) trains the two agents on two workers: each run takes 2.5-3 minutes on one
-core, and together in one file they were the suite's longest stretch."""
+``--dist loadfile`` (the Makefile's) trains the two agents on two workers: each run is one of the suite's longest
+tests, and together in one file they were its longest stretch."""
 from __future__ import annotations
 
 import pytest
