@@ -184,8 +184,11 @@ def test_an_unknown_key_is_named_by_its_path(tmp_path, path, unknown):
     document = copy.deepcopy(DEMO_DATA)
     container, _ = locate(document, path)
     assume(isinstance(container, dict) and unknown not in container)  # a list item has no keys to add
-    container[unknown] = 1  # beside the node at ``path``
     parent = parent_path(path)
+    # a scenario's other sources are known keys that conflict with its inline fields (Hypothesis also tries the
+    # code's own string constants, such as these)
+    assume(not (parent == "scenario" and unknown in ("generator", "dataset")))
+    container[unknown] = 1  # beside the node at ``path``
     error = load_error(write(tmp_path, yaml.safe_dump(document)))
     assert error is not None and error.field == (f"{parent}.{unknown}" if parent else unknown), error
 
