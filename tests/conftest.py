@@ -18,16 +18,17 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
 import pytest  # noqa: E402
 
-LONGEST_FIRST = ("test_learning_sac.py", "test_learning.py", "test_scaling.py", "test_runner_udp.py",
-                 "test_runner_replay.py", "test_training_evaluation.py", "test_training_resume.py",
-                 "test_training_meta.py", "test_training_rewards.py", "test_onboard_install.py",
-                 "test_link_faults_outages.py", "test_link_faults_failsafes.py", "test_link_faults_model.py",
-                 "test_mavsdk_offboard.py", "test_mavsdk_actions.py", "test_mavsdk_runner_link.py",
-                 "test_mavproxy_flight.py", "test_mavsdk_mission.py", "test_decision_ceiling.py",
-                 "test_export_parity.py", "test_export_manifest.py", "test_compare.py",
-                 "test_pymavlink_udp_flight.py", "test_signing.py")
-"""The test files that take longest, longest first (from ``pytest --durations=0``). ``make test`` hands whole files
-to its workers in collection order (``--dist loadfile --no-loadscope-reorder``): started first, the long files run
+LONGEST_FIRST = ("test_runner_udp.py", "test_learning_sac.py", "test_mavproxy_flight.py", "test_learning.py",
+                 "test_onboard_install.py", "test_scaling.py", "test_mavsdk_mission.py", "test_runner_replay.py",
+                 "test_mavsdk_offboard.py", "test_training_evaluation.py", "test_link_faults_outages.py",
+                 "test_mavsdk_actions.py", "test_compare.py", "test_pymavlink_udp_flight.py",
+                 "test_runner_autopilots.py", "test_training_resume.py", "test_decision_ceiling.py",
+                 "test_bad_missions.py", "test_training_meta.py", "test_link_faults_failsafes.py",
+                 "test_export_parity.py", "test_belief_calibration.py", "test_env.py", "test_signing.py",
+                 "test_fuzz_mavlink.py", "test_link_faults_model.py", "test_mavsdk_runner_link.py")
+"""The test files that take longest, roughly longest first (from ``pytest --durations=0``), those that wait on real
+time (UDP flights at 1x) interleaved with those that keep a core busy (training). ``make test`` hands whole files to
+its workers in collection order (``--dist loadfile --no-loadscope-reorder``): started first, the long files run
 beside the many short ones instead of after them, where one worker would be left running a training alone."""
 
 

@@ -148,9 +148,9 @@ def test_drift_and_blur_keep_the_mass_of_a_finer_map():
 
 def test_on_the_2km_square_the_map_expects_what_is_found():
     large = read_generator_config(str(ROOT / "docs" / "results" / "large-area.yaml"))
-    figures = fly("greedy_bayes", large, "val", 200, None, particles=200)
+    figures = fly("greedy_bayes", large, "val", 100, None, particles=100)
     assert figures["map_cells"] == 64
-    # Against the sightings themselves: noisy (the standard error is about 5 points at 200 sorties), so only a gross
+    # Against the sightings themselves: noisy (the standard error is about 5 points at 100 sorties), so only a gross
     # error (a look counted twice, a hazard summed past the first sighting) fails this.
     assert abs(figures["residual"]) < 3.0 * figures["se"]
     # Against the Monte Carlo reference on the same looks, free of the detection draws' noise: within a point. A map
