@@ -7,6 +7,7 @@ though nothing on the runtime's path imports it; the test checks that it is neve
 """
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import subprocess
 import sys
@@ -29,13 +30,35 @@ def pip(python: Path, *args: str) -> None:
                    check=True, capture_output=True, text=True, timeout=900)
 
 
+TORCH_RUNTIME = ("torch", "filelock", "fsspec", "jinja2", "markupsafe", "mpmath", "networkx", "sympy",
+                 "typing_extensions")
+"""torch and what it needs to run (its requirements, and theirs)."""
+
+
+def link_torch(folder: Path) -> Path:
+    """``folder`` filled with links to this environment's torch and its runtime requirements (their packages and
+    their metadata): on a venv's path (a .pth file) pip counts torch as installed, as it is after ``pip install
+    torch==2.13.0``, without copying and compiling its gigabyte again."""
+    folder.mkdir()
+    for name in TORCH_RUNTIME:
+        distribution = importlib.metadata.distribution(name)
+        for top in {Path(str(entry)).parts[0] for entry in distribution.files or ()}:
+            if top not in ("..", "__pycache__") and not (folder / top).exists():
+                (folder / top).symlink_to(distribution.locate_file(top))
+    return folder
+
+
 @pytest.fixture(scope="module")
 def onboard(tmp_path_factory) -> Path:
-    """The bin folder of a fresh venv holding torch (the CPU build the project pins) and ``pip install ROOT``."""
-    venv = tmp_path_factory.mktemp("onboard") / "venv"
+    """The bin folder of a fresh venv holding torch (this environment's, the CPU build the project pins, linked by
+    ``link_torch``) and ``pip install ROOT``."""
+    base = tmp_path_factory.mktemp("onboard")
+    venv = base / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
     python = venv / "bin" / "python"
-    pip(python, "torch==2.13.0")
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                          check=True, capture_output=True, text=True).stdout.strip()
+    (Path(site) / "torch-runtime.pth").write_text(f"{link_torch(base / 'torch-runtime')}\n")
     pip(python, str(ROOT))
     return venv / "bin"
 
