@@ -55,7 +55,7 @@ def evaluate(trainer: Trainer) -> dict:
                                                                   deterministic=True), goals))
 
 
-STEPS = {"hrl-sac": 16_000, "sac": 20_000}
+STEPS = {"hrl-sac": 16_000, "sac": 15_000}
 UPDATES_PER_STEP = 0.5
 """One update of each network every other environment step: the update is most of a step's time, and both agents
 learn these missions at this rate (docs/training.md)."""
