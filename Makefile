@@ -1,5 +1,5 @@
 # Local virtual environment with everything the stack and its tests need.
-# torch is pinned first to the CPU build (2.13.0) so that nothing else pulls a CUDA build.
+# torch is pinned to the CPU build (2.13.0) in the same install, so that nothing else pulls a CUDA build.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -12,8 +12,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet torch==2.13.0 -e '.[test]'
 	# MAVProxy without its declared dependencies: on Linux they pull vtk and the GUI opencv-python, which would
 	# replace opencv-python-headless; the ones its command line needs are in the test extra (pyproject.toml).
 	$(BIN)/python -m pip install --quiet --no-deps MAVProxy==1.8.75

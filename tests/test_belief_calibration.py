@@ -19,7 +19,6 @@ from map_calibration import fly  # noqa: E402
 from autonomy.observation import LAYOUT_V4  # noqa: E402
 from missions import belief, search  # noqa: E402
 from missions.coverage import GRID_SIZE, OBS_GRID, downsample_coverage  # noqa: E402
-from missions.generator import TASK_V1  # noqa: E402
 from missions.mission import FlightSettings  # noqa: E402
 from missions.scenario import Conditions, Scenario, SearchArea, Target  # noqa: E402
 from missions.search import ScenarioBatch  # noqa: E402
@@ -161,8 +160,7 @@ def test_on_the_2km_square_the_map_expects_what_is_found():
 
 def test_the_same_sorties_give_the_same_figures():
     large = read_generator_config(str(ROOT / "docs" / "results" / "large-area.yaml"))
-    for generator in (TASK_V1, large):
-        first = fly("greedy_bayes", generator, "val", 12, None)
-        second = fly("greedy_bayes", generator, "val", 12, None)
-        first.pop("wall_s", None), second.pop("wall_s", None)
-        assert first == second
+    first = fly("greedy_bayes", large, "val", 8, None, particles=20)
+    second = fly("greedy_bayes", large, "val", 8, None, particles=20)
+    first.pop("wall_s", None), second.pop("wall_s", None)
+    assert first == second
