@@ -150,3 +150,19 @@ class UdpClient:
 
     def close(self) -> None:
         self.conn.close()
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """The export tests' short training run of each algorithm (export_helpers.trained_runs, one per process)."""
+    from export_helpers import trained_runs
+
+    return trained_runs(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def artifacts(runs, tmp_path_factory):
+    """Those runs exported in every format and precision (export_helpers.exported_artifacts)."""
+    from export_helpers import exported_artifacts
+
+    return exported_artifacts(runs, tmp_path_factory)

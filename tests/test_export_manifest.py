@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from export_helpers import FORMATS, K, exported_artifacts, single_line_error, trained_runs
+from export_helpers import FORMATS, K, single_line_error
 
 import hrlsac_cli
 from autonomy.observation import OBS_DIM
@@ -27,17 +27,6 @@ from policies.config import TrainConfig
 from policies.export.artifact import artifact_bytes, build_manifest, export_policy
 from policies.export.module import policy_module
 from policies.export.parity import ACTION_TOLERANCE
-
-
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory) -> dict[str, Path]:
-    """A short training run of each algorithm (export_helpers.trained_runs, shared by the export test files)."""
-    return trained_runs(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def artifacts(runs, tmp_path_factory) -> dict[tuple[str, str], Path]:
-    return exported_artifacts(runs, tmp_path_factory)
 
 
 # ---------------------------------------------------------------------------------------------------- manifest

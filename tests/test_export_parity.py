@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from export_helpers import ALGOS, FORMATS, K, exported_artifacts, recorded_observations, trained_runs
+from export_helpers import ALGOS, FORMATS, K, recorded_observations
 
 from autonomy.observation import META_OBS_DIM, OBS_DIM
 from autonomy.policy import load_policy
@@ -24,17 +24,6 @@ from policies.checkpoint import CheckpointPolicy
 from policies.export.artifact import ParityError, artifact_bytes, build_manifest, export_policy
 from policies.export.module import PRECISIONS, policy_module
 from policies.export.parity import ACTION_TOLERANCE, INT8_ACTION_TOLERANCE, TOLERANCES, Parity, check_parity
-
-
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory) -> dict[str, Path]:
-    """A short training run of each algorithm (export_helpers.trained_runs, shared by the export test files)."""
-    return trained_runs(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def artifacts(runs, tmp_path_factory) -> dict[tuple[str, str], Path]:
-    return exported_artifacts(runs, tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
