@@ -11,7 +11,6 @@ venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet torch==2.13.0 -e '.[test]'
 	# MAVProxy without its declared dependencies: on Linux they pull vtk and the GUI opencv-python, which would
 	# replace opencv-python-headless; the ones its command line needs are in the test extra (pyproject.toml).
