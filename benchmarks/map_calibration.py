@@ -28,14 +28,9 @@ environment as ``benchmarks/sim_to_sitl.py`` flies it, under training's rules), 
 scenarios of the split at 1 km (the task's own generator) and on the 2 km square (``--large-area``, a generator
 config file, docs/results/large-area.yaml).
 
-``--cost`` measures instead what the map costs the vectorised environment (``--num-envs``, random actions, auto-resets
-included, scenario pool warmed): milliseconds per step (median of ``--repeats`` timed runs) and the bytes the map's
-two grids (belief and cumulative probability of detection) hold, per area.
-
 Usage: python benchmarks/map_calibration.py [--episodes 2000] [--split val] [--only greedy_bayes,policy]
                                             [--areas 1km,2km] [--policy policies/pretrained/hrl-sac.pt]
                                             [--particles 0]
-       python benchmarks/map_calibration.py --cost [--num-envs 1024] [--repeats 3] [--areas 1km,2km]
 """
 from __future__ import annotations
 
@@ -182,29 +177,6 @@ def fly(searcher: str, generator, split: str, episodes: int, policy, particles: 
     return figures
 
 
-def step_cost(generator, num_envs: int, repeats: int, steps: int = 100) -> dict:
-    """Milliseconds per step of the vectorised SarSearch-v1 environment on ``generator``'s scenarios (random
-    actions; median of ``repeats`` runs of ``steps`` steps after a warm-up) and the bytes of the map's grids."""
-    from policies.env.core import SarSearchConfig
-    from policies.env.vector import SarSearchVectorEnv
-
-    env = SarSearchVectorEnv(num_envs, SarSearchConfig(pool_size=2_000, generator=generator))
-    rng = np.random.default_rng(0)
-    actions = rng.uniform([-1, -1, 0, 0], 1, size=(16, num_envs, 4)).astype(np.float32)
-    env.reset(seed=0)
-    for t in range(300):  # warm the scenario pool (each scenario is generated once)
-        env.step(actions[t % 16])
-    runs = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for t in range(steps):
-            env.step(actions[t % 16])
-        runs.append(1000.0 * (time.perf_counter() - start) / steps)
-    core = env.core
-    return {"num_envs": num_envs, "ms_per_step": float(np.median(runs)), "ms_per_step_runs": runs,
-            "map_cells": list(core.belief.shape[1:]), "map_bytes": int(core.belief.nbytes + core.coverage.nbytes)}
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=2000)
@@ -217,11 +189,7 @@ def main() -> int:
     parser.add_argument("--particles", type=int, default=0,
                         help="also compare the map's summed hazard with a Monte Carlo reference of this many victims "
                         "per sortie (0: not)")
-    parser.add_argument("--cost", action="store_true", help="measure the map's cost in the vectorised environment")
-    parser.add_argument("--num-envs", type=int, default=1024, help="--cost: environments stepped together")
-    parser.add_argument("--repeats", type=int, default=3, help="--cost: timed runs (the median is reported)")
-    parser.add_argument("--out", default=None, help="report file (default benchmarks/results/map_calibration.json, "
-                        "with --cost map_cost.json)")
+    parser.add_argument("--out", default=results_file("map_calibration.json"))
     args = parser.parse_args()
     searchers = [s.strip() for s in args.only.split(",") if s.strip()]
     areas = [a.strip() for a in args.areas.split(",") if a.strip()]
@@ -235,15 +203,6 @@ def main() -> int:
         generators = {"1km": TASK_V1, "2km": read_generator_config(args.large_area)}
     except ValueError as exc:
         parser.error(str(exc))
-    if args.cost:
-        costs = {}
-        for area in areas:
-            costs[area] = step_cost(generators[area], args.num_envs, args.repeats)
-            print(f"{area}: {costs[area]['ms_per_step']:.1f} ms per step of {args.num_envs} environments; map "
-                  f"{costs[area]['map_cells'][0]} x {costs[area]['map_cells'][1]} cells, "
-                  f"{costs[area]['map_bytes'] / 2 ** 20:.0f} MiB", flush=True)
-        write_report(args.out or results_file("map_cost.json"), {"large_area": args.large_area, "cost": costs})
-        return 0
     policy = None
     if "policy" in searchers:
         from autonomy.policy import load_policy
@@ -270,7 +229,7 @@ def main() -> int:
                   f"  {100 * figures['expected_in_area']:6.1f}% ({100 * figures['residual_in_area']:+5.1f}, "
                   f"{100 * figures['se_in_area']:3.1f})  {100 * figures['success_rate']:5.1f}%"
                   f"{versus}  ({figures['wall_s']:.0f} s)", flush=True)
-    write_report(args.out or results_file("map_calibration.json"), report)
+    write_report(args.out, report)
     return 0
 
 
