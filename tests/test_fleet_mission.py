@@ -4,13 +4,12 @@ single-drone mission commands refusing a fleet file."""
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+from cli_harness import run_cli
 from mission_file_helpers import BASE
 
 from missions.fleet import MAX_VEHICLES, Fleet, FleetVehicle
@@ -120,9 +119,8 @@ def test_the_shipped_fleet_demo_is_three_drones_on_a_launch_line():
 def test_the_single_drone_mission_commands_refuse_a_fleet_file_in_one_line(command):
     demo = Path(__file__).resolve().parents[1] / "missions" / "library" / "fleet-demo.yaml"
     extra = ["--connect", "udpin:127.0.0.1:0"] if command == "run" else []
-    result = subprocess.run([sys.executable, "-m", "hrlsac_cli", "mission", command, str(demo), "--policy",
-                             "policies/pretrained/hrl-sac.pt", *extra], capture_output=True, text=True, timeout=120,
-                            cwd=Path(__file__).resolve().parents[1])
-    assert result.returncode == 2 and result.stdout == ""
-    assert result.stderr.strip() == (f"hrlsac mission {command}: error: {demo}: fleet: 3 drones; this command flies "
+    policy = Path(__file__).resolve().parents[1] / "policies" / "pretrained" / "hrl-sac.pt"
+    result = run_cli("mission", command, str(demo), "--policy", str(policy), *extra)
+    assert result.code == 2 and result.out == ""
+    assert result.err.strip() == (f"hrlsac mission {command}: error: {demo}: fleet: 3 drones; this command flies "
                                      "one drone: remove the fleet section to fly the scenario with one")

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import torch
 from pymavlink.dialects.v20 import common as mavlink
+from cli_harness import run_cli
 from runner_helpers import ALL_STATES, FLIGHT, HRLSAC, ours, read_tlog, small_mission, trained_policy, with_actions
 
 from autonomy.policy import Policy
@@ -267,15 +268,13 @@ def test_a_replay_tlog_is_dated_from_its_start_time(policy, mission_file, tmp_pa
 def test_mission_command_turns_bad_input_into_one_line(policy, mission_file, change, message):
     args = {"--policy": str(policy.path), "--episodes": "1"}
     args[change[0]] = change[1]
-    result = subprocess.run([*HRLSAC, "mission", "replay", str(mission_file), *sum(args.items(), ())],
-                            capture_output=True, text=True, timeout=120)
-    assert result.returncode == 2
-    lines = result.stderr.strip().splitlines()
+    result = run_cli("mission", "replay", str(mission_file), *sum(args.items(), ()))
+    assert result.code == 2
+    lines = result.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hrlsac mission replay: error: ") and lines[0].endswith(message)
 
 
 def test_mission_run_refuses_a_bad_connection_url(policy, mission_file):
-    result = subprocess.run([*HRLSAC, "mission", "run", str(mission_file), "--policy", str(policy.path),
-                             "--connect", "udp:nowhere"], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 2
-    assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.stderr
+    result = run_cli("mission", "run", str(mission_file), "--policy", str(policy.path), "--connect", "udp:nowhere")
+    assert result.code == 2
+    assert "cannot use connection 'udp:nowhere': write udpin:HOST:PORT" in result.err

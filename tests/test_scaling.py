@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from cli_harness import run_cli
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -236,17 +237,15 @@ def test_a_resumed_sweep_run_is_the_folder_hrlsac_train_writes_uninterrupted(swe
                       torch.load(reference / "checkpoint.pt", weights_only=False))
 
 
-def test_hrlsac_train_trains_one_run_of_a_sweep_file_as_the_sweep_does(sweep_runs, tmp_path):
+def test_hrlsac_train_trains_one_run_of_a_sweep_file_as_the_sweep_does(sweep_runs, tmp_path, monkeypatch):
     sweep, *_ = sweep_runs
     sweep_file = tmp_path / "tiny.yaml"
     sweep_file.write_text(json.dumps(SWEEP))  # JSON is YAML
-    result = subprocess.run([*HRLSAC, "train", "--sweep", str(sweep_file), "--quiet"], capture_output=True,
-                            text=True, timeout=60, cwd=tmp_path)
-    assert result.returncode == 2
-    assert result.stderr.strip().endswith("give --run NAME; the sweep's runs: sac-default-seed3, "
-                                          "hrl-sac-default-seed3")
-    subprocess.run([*HRLSAC, "train", "--sweep", str(sweep_file), "--run", KILLED, "--quiet"], check=True,
-                   timeout=300, cwd=tmp_path)
+    monkeypatch.chdir(tmp_path)  # the sweep file's relative 'out'
+    result = run_cli("train", "--sweep", str(sweep_file), "--quiet")
+    assert result.code == 2
+    assert result.err.strip().endswith("give --run NAME; the sweep's runs: sac-default-seed3, hrl-sac-default-seed3")
+    assert run_cli("train", "--sweep", str(sweep_file), "--run", KILLED, "--quiet").code == 0
     trained = tmp_path / "runs" / "tiny" / KILLED  # the folder the sweep file's 'out' gives the run
     run = sweep.out / KILLED
     assert json.loads((trained / "config.json").read_text()) == json.loads((run / "config.json").read_text())
@@ -256,9 +255,8 @@ def test_hrlsac_train_trains_one_run_of_a_sweep_file_as_the_sweep_does(sweep_run
     # A changed sweep file is refused on --resume, naming the field.
     changed = tmp_path / "changed.yaml"
     changed.write_text(json.dumps({**SWEEP, "set": {**SMALL, "batch_size": 16}}))
-    result = subprocess.run([*HRLSAC, "train", "--sweep", str(changed), "--run", KILLED, "--out", str(trained),
-                             "--resume", "--quiet"], capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert result.returncode == 2 and "was trained with batch_size=32, the sweep now asks 16" in result.stderr
+    result = run_cli("train", "--sweep", str(changed), "--run", KILLED, "--out", str(trained), "--resume", "--quiet")
+    assert result.code == 2 and "was trained with batch_size=32, the sweep now asks 16" in result.err
 
 
 def test_a_sweep_refuses_run_folders_trained_with_another_config(sweep_runs):
@@ -293,10 +291,9 @@ def test_evaluate_command_with_workers_writes_the_serial_metrics(sweep_runs, tmp
     sweep, *_ = sweep_runs
     run = sweep.out / f"{KILLED}"
     out = tmp_path / "eval.json"
-    result = subprocess.run([*HRLSAC, "evaluate", str(run), "--split", "val", "--episodes", "11", "--workers", "3",
-                             "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=ROOT)
-    assert result.returncode == 0, result.stderr
-    assert "evaluating 11 episodes on 3 local processes" in result.stderr
+    result = run_cli("evaluate", str(run), "--split", "val", "--episodes", "11", "--workers", "3", "--out", str(out))
+    assert result.code == 0, result.err
+    assert "evaluating 11 episodes on 3 local processes" in result.err
     written = json.loads(out.read_text())
     assert written.pop("scenarios") == "generator split val"  # the command labels what it flew
     assert written == evaluate_checkpoint(run, "val", 11)
@@ -322,8 +319,10 @@ def test_replay_with_workers_gives_the_serial_reports_and_tlogs(ray_instance, tm
     env = {key: value for key, value in os.environ.items() if key != "MAVLINK20"}
     base = [*HRLSAC, "mission", "replay", str(tmp_path / "small.yaml"), "--policy", str(PRETRAINED),
             "--episodes", "3", "--seed", "4", "--no-video", "--quiet", "--accept-flight-mismatch"]
-    for name, extra in (("serial", []), ("processes", ["--workers", "2"])):
-        subprocess.run([*base, "--out", str(tmp_path / name), *extra], check=True, timeout=300, cwd=ROOT, env=env)
+    # serial in this process; on worker processes started by a process whose environment lacks MAVLINK20
+    assert run_cli(*base[len(HRLSAC):], "--out", str(tmp_path / "serial")).code == 0
+    subprocess.run([*base, "--out", str(tmp_path / "processes"), "--workers", "2"], check=True, timeout=300, cwd=ROOT,
+                   env=env)
     serial = replay_outputs(tmp_path / "serial")
     assert sorted(serial) == [f"seed-0000{s}/{f}" for s in (4, 5, 6) for f in ("flight.tlog", "report.json")]
     assert replay_outputs(tmp_path / "processes") == serial

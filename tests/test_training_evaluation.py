@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from cli_harness import run_cli
 from training_helpers import log_rows, small_config
 
 from autonomy.policy import load_policy
@@ -71,24 +72,20 @@ def test_train_and_evaluate_commands(tmp_path):
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert json.loads((run / "config.json").read_text())["total_steps"] == 300
-    again = subprocess.run([*base, "train", "--algo", "sac", "--steps", "300", "--out", str(run)],
-                           capture_output=True, text=True, timeout=120)
-    assert again.returncode == 2 and "already holds a run" in again.stderr
-    bad = subprocess.run([*base, "train", "--out", str(tmp_path / "x"), "--set", "warmup=5"],
-                         capture_output=True, text=True, timeout=120)
-    assert bad.returncode == 2 and "expected FIELD=VALUE" in bad.stderr
-    evaluated = subprocess.run([*base, "evaluate", str(run), "--split", "val", "--episodes", "4"],
-                               capture_output=True, text=True, timeout=300)
-    assert evaluated.returncode == 0, evaluated.stderr
+    # the rest in this process (tests/cli_harness.py): the same main(), without an interpreter start each
+    again = run_cli("train", "--algo", "sac", "--steps", "300", "--out", str(run))
+    assert again.code == 2 and "already holds a run" in again.err
+    bad = run_cli("train", "--out", str(tmp_path / "x"), "--set", "warmup=5")
+    assert bad.code == 2 and "expected FIELD=VALUE" in bad.err
+    evaluated = run_cli("evaluate", str(run), "--split", "val", "--episodes", "4")
+    assert evaluated.code == 0, evaluated.err
     metrics = json.loads((run / "eval_val.json").read_text())
     assert metrics["episodes"] == 4 and metrics["algo"] == "sac" and not metrics["flight_rules"]
-    flown = subprocess.run([*base, "evaluate", str(run), "--split", "val", "--episodes", "4", "--flight-rules"],
-                           capture_output=True, text=True, timeout=300)
-    assert flown.returncode == 0 and "eval_val_flight.json" in flown.stdout, flown.stderr
+    flown = run_cli("evaluate", str(run), "--split", "val", "--episodes", "4", "--flight-rules")
+    assert flown.code == 0 and "eval_val_flight.json" in flown.out, flown.err
     assert json.loads((run / "eval_val_flight.json").read_text())["flight_rules"]
-    missing = subprocess.run([*base, "evaluate", str(tmp_path / "nothing")], capture_output=True, text=True,
-                             timeout=120)
-    assert missing.returncode == 2 and "no checkpoint" in missing.stderr
+    missing = run_cli("evaluate", str(tmp_path / "nothing"))
+    assert missing.code == 2 and "no checkpoint" in missing.err
 
 
 def test_quick_evaluations_are_logged_and_do_not_change_training(tmp_path):
