@@ -12,6 +12,7 @@ from typing import Callable
 
 from hrlsac_cli import GROUPS
 from hrlsac_cli.help_format import HelpFormatter
+from missions.searchers import BEST_SEARCHER, SEARCHERS
 
 DEFAULT_OUT = Path("mission-output")
 RUN_SUMMARY = GROUPS["mission"]["run"][1]  # written once, in the dispatcher's table (``hrlsac mission --help``)
@@ -22,7 +23,11 @@ def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.Argumen
     parser = argparse.ArgumentParser(prog=prog, description=summary,
                                      formatter_class=HelpFormatter)
     parser.add_argument("mission", help="mission file (YAML), e.g. missions/library/demo.yaml")
-    parser.add_argument("--policy", required=True, help="policy artifact written by 'hrlsac export'")
+    pilot = parser.add_mutually_exclusive_group(required=True)
+    pilot.add_argument("--policy", metavar="FILE", help="policy artifact written by 'hrlsac export'")
+    pilot.add_argument("--pilot", metavar="NAME",
+                       help=f"fly a scripted searcher instead of a policy artifact: {', '.join(SEARCHERS)} "
+                            f"({BEST_SEARCHER} finds the victim most often: docs/results.md)")
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default: {DEFAULT_OUT}/MISSION-NAME)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the simulated camera's detections (and of the vehicle's sensor noise)")
@@ -38,9 +43,11 @@ def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.Argumen
 
 
 def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argparse.Namespace], None]):
-    """Load and check what a mission subcommand flies: ``(mission, policy, out)``, or an exit code after one
-    error line. ``check`` validates the subcommand's own arguments (raising ValueError)."""
-    from autonomy.policy import PolicyArtifactError, load_policy
+    """Load and check what a mission subcommand flies: ``(mission, policy, out)`` (``args.choice``: the
+    :class:`autonomy.pilots.PilotChoice`), or an exit code after one error line. ``check`` validates the
+    subcommand's own arguments (raising ValueError)."""
+    from autonomy.pilots import PilotChoice
+    from autonomy.policy import Policy, PolicyArtifactError
     from missions.mission_file import MissionFileError, load_mission
     from mavlink_signing import load_key_file
 
@@ -49,12 +56,14 @@ def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argpar
         if mission.fleet is not None:
             raise ValueError(f"{args.mission}: fleet: {len(mission.fleet.vehicles)} drones; this command flies one "
                              "drone: remove the fleet section to fly the scenario with one")
-        policy = load_policy(args.policy)
+        args.choice = PilotChoice(policy=args.policy, scripted=args.pilot)
+        policy = args.choice.load()
         if not 0 <= args.seed <= 2**32 - 1:  # numpy seeds the sensors and the camera with it
             raise ValueError(f"--seed must be in [0, {2**32 - 1}], got {args.seed}")
         check(args)
         args.key = load_key_file(args.signing_key) if args.signing_key else None
-        _check_flight_settings(mission, policy, args.accept_flight_mismatch, args.mission)
+        if isinstance(policy, Policy):  # a scripted searcher flies any flight settings
+            _check_flight_settings(mission, policy, args.accept_flight_mismatch, args.mission)
     except (MissionFileError, PolicyArtifactError, ValueError) as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
@@ -133,7 +142,7 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
         print(f"{name}: error: --connect {args.connect}: {exc}", file=sys.stderr)
         return 2
     say = (lambda text: None) if args.quiet else print
-    facts = dict(policy=str(policy.path), policy_sha256=policy.sha256, seed=args.seed, clock="wall",
+    facts = dict(**policy.describe(), seed=args.seed, clock="wall",
                  connect=args.connect, backend=args.backend)
     # Rewritten atomically while flying, "complete": false until the end: a killed run leaves its record.
     partial = PartialReport(out / REPORT, lambda: {**runner.report(), **facts})
@@ -151,7 +160,7 @@ def _run(mission, policy, args, out: Path, name: str) -> int:
     if link.signing is not None:
         report["signing"] = {"runner": link.signing.summary()}
     partial.finish(report)
-    print(f"{mission.name}: search ended: {report['search_end']}; success {report['success']}; "
+    print(f"{mission.name} ({report['pilot']}): search ended: {report['search_end']}; success {report['success']}; "
           f"report: {out / REPORT}")
     aborts = [event["reason"] for event in report["events"] if event["event"] == "abort"]
     for reason in aborts:

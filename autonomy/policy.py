@@ -38,6 +38,7 @@ from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
 from missions.goals import goal_due
+from missions.search_state_v1 import BeliefSearchState
 
 ZIP_MAGIC = b"PK\x03\x04"
 # Names of the two programs in a torch-export artifact (a PT2 archive). "model" is the name plain
@@ -86,6 +87,13 @@ class Policy:
         event (a new candidate, the bingo call), which its search state tells:
         ``missions.search_state_v1.BeliefSearchState.goal_due``."""
         return self.hierarchical and bool(goal_due(step, self.manifest.subgoal_interval))
+
+    def attach(self, state: BeliefSearchState) -> None:
+        """Nothing to do: an artifact acts on the observation alone (``autonomy.search_pilot.FlownPolicy``)."""
+
+    def describe(self) -> dict:
+        """The report's account of the pilot: the artifact's algorithm, path and SHA-256."""
+        return {"pilot": self.manifest.algorithm, "policy": str(self.path), "policy_sha256": self.sha256}
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         """(N, 284) or (284,) raw meta observations -> goal indices (N,) or a scalar, int64 (-1: flat policy)."""

@@ -54,7 +54,8 @@ the fuel, as PX4's and ArduPilot's battery failsafes do not trust a companion co
 
 
 class FlownPolicy(Protocol):
-    """What the pilot needs of a policy: :class:`autonomy.policy.Policy` (a loaded artifact) or a scripted one."""
+    """What the pilot needs of a policy: :class:`autonomy.policy.Policy` (a loaded artifact) or a scripted searcher
+    (:class:`autonomy.pilots.ScriptedPilot`)."""
 
     @property
     def hierarchical(self) -> bool:
@@ -73,6 +74,13 @@ class FlownPolicy(Protocol):
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """The action (4,) for an observation."""
+
+    def attach(self, state: BeliefSearchState) -> None:
+        """Called once, before the first decision, with the search state the pilot keeps: a scripted searcher
+        reads the crew's map and candidates from it; an artifact needs only the observation."""
+
+    def describe(self) -> dict:
+        """What the mission report says of the pilot: its name ("pilot") and what identifies it exactly."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +127,7 @@ class SearchPilot:
                                             num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))
         self.state = BeliefSearchState(scen, self.flight)
         self.state.reset(np.array([0]), np.array([seed], dtype=np.uint64))
+        policy.attach(self.state)
         self.intensity = np.zeros(1)
         self.zoom = np.zeros(1)
         self.goal_segments = 0

@@ -42,7 +42,7 @@ from autonomy.observation import LAYOUT_V3
 from missions.coverage import SENSOR_ON_INTENSITY
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
 from policies.checkpoint import CheckpointPolicy
-from policies.env.baselines_v1 import fly_straight
+from missions.searchers import fly_straight
 from policies.env.baselines_v0 import ZOOM as SCRIPTED_ZOOM
 from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise

@@ -23,7 +23,7 @@ import time
 from common import results_file, write_report
 
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines_v1 import BASELINES
+from missions.searchers import SEARCHERS
 from policies.env.baselines_v0 import BASELINES_V0
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.baselines import run_baseline
@@ -40,7 +40,7 @@ def main() -> int:
     parser.add_argument("--generator", default=None, help="generator config file (YAML) instead of the task's")
     parser.add_argument("--out", default=results_file("baselines.json"))
     args = parser.parse_args()
-    names = list(BASELINES if args.task == "SarSearch-v1" else BASELINES_V0)
+    names = list(SEARCHERS if args.task == "SarSearch-v1" else BASELINES_V0)
     chosen = names if args.only is None else [name.strip() for name in args.only.split(",")]
     unknown = [name for name in chosen if name not in names]
     if unknown:

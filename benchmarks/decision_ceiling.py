@@ -2,7 +2,7 @@
 
 A learned meta-controller can beat the best scripted searcher only by deciding better than its fixed rules. This
 measures, on the same scenarios and detection draws, what perfect versions of each decision would be worth to the
-tuned greedy Bayes searcher (``policies.env.baselines_v1``, ``TUNED["greedy_bayes"]``):
+tuned greedy Bayes searcher (``missions.searchers``, ``TUNED["greedy_bayes"]``):
 
 * **oracle skip**: which candidate is the victim is known, so the drone never flies to a decoy for a close look (one
   beside the victim may still be identified in passing during the victim's own; the victim still needs its close
@@ -62,7 +62,7 @@ from missions.scenario import CATEGORIES
 from missions.search import OBJECT_SIZE_M
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines_v1 import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
+from missions.searchers import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -188,7 +188,7 @@ def main() -> int:
                         "belief within that many cells of it (a less myopic choice)")
     parser.add_argument("--rollouts", type=numbers, default=[],
                         help="comma-separated lookahead horizons (s): greedy Bayes choosing each next cell by "
-                        "rollouts in the belief (policies.env.baselines_v1.LookaheadBayes; greedy Bayes' tuned "
+                        "rollouts in the belief (missions.searchers.LookaheadBayes; greedy Bayes' tuned "
                         "settings)")
     parser.add_argument("--rollout-options", type=int, default=6, help="cells each lookahead tries (default 6)")
     parser.add_argument("--identify-factor", type=float, default=None,

@@ -41,7 +41,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eval", nargs="*", default=[], help="evaluation files of hrlsac evaluate (eval_*.json)")
     parser.add_argument("--scripted", nargs="*", default=[],
-                        help="scripted searchers to fly (policies.env.baselines_v1)")
+                        help="scripted searchers to fly (missions.searchers)")
     parser.add_argument("--split", default="val", choices=["train", "val", "test"])
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--generator", default=None, help="generator config file (as hrlsac evaluate --generator)")

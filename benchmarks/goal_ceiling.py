@@ -1,6 +1,6 @@
 """What SarSearch-v1's goal set allows a perfect low level: the scripted searchers' rules around a goal's point.
 
-The scripted searchers (``policies.env.baselines_v1``) share their rules around a search point: fly to the candidate
+The scripted searchers (``missions.searchers``) share their rules around a search point: fly to the candidate
 worth a look and look at it, head home at the bingo reserve, fly straight. Here that search point is the point a
 meta-controller goal is grounded to (``missions.goals.ground_goals_v1``, as if every decision chose that goal),
 grounded again on arrival and, with --every K, every K steps (HRL-SAC's cadence is 30): a scripted low level and
@@ -23,7 +23,7 @@ from common import results_file, write_report
 from decision_ceiling import fly_scripted
 
 from missions import goals as goal_logic
-from policies.env.baselines_v1 import TUNED, GreedyBayes, ScriptedSearch
+from missions.searchers import TUNED, GreedyBayes, ScriptedSearch
 
 
 class GoalPointSearch(ScriptedSearch):

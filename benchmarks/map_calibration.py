@@ -23,7 +23,7 @@ Two other sums are reported beside it, neither of which a calibrated map needs t
 drifted out of the area, so it over-states wherever the map's mass drifts off the grid), and ``expected_removed``
 sums ``m_t`` itself (it falls short of the sightings once the map has been searched down).
 
-Searchers: the tuned greedy Bayes (``policies.env.baselines_v1``) and the shipped policy (``--policy``, flown in the
+Searchers: the tuned greedy Bayes (``missions.searchers``) and the shipped policy (``--policy``, flown in the
 environment as ``benchmarks/sim_to_sitl.py`` flies it, under training's rules), each over the first ``--episodes``
 scenarios of the split at 1 km (the task's own generator) and on the 2 km square (``--large-area``, a generator
 config file, docs/results/large-area.yaml).
@@ -47,7 +47,7 @@ from missions.mission import FlightSettings
 from missions.search import OBJECT_SIZE_M, detection_probability_from_factors
 from missions.search_state_v1 import TARGET_SLOTS
 from policies.cli.evaluate import read_generator_config
-from policies.env.baselines_v1 import TUNED, GreedyBayes
+from missions.searchers import TUNED, GreedyBayes
 from policies.evaluation.episodes import episode_batch, run_episodes
 
 SEARCHERS = ("greedy_bayes", "policy")

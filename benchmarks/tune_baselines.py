@@ -3,7 +3,7 @@
 For each searcher, starting from ``ScriptedSettings()``, every knob in turn is set to each of its candidate values
 (the others held) and kept at the best; two passes. Best = the highest success rate on the first --episodes val
 scenarios among settings that run dry in at most --max-ran-dry of them (a crew keeps its reserve). Every
-evaluation is written to the JSON report, the chosen settings last; ``policies.env.baselines_v1.TUNED`` is set from it.
+evaluation is written to the JSON report, the chosen settings last; ``missions.searchers.TUNED`` is set from it.
 
 Usage: python benchmarks/tune_baselines.py [--episodes 500] [--only greedy_bayes] [--out FILE]
 """
@@ -16,7 +16,7 @@ import time
 
 from common import results_file, write_report
 
-from policies.env.baselines_v1 import ScriptedSettings
+from missions.searchers import ScriptedSettings
 from policies.evaluation.baselines import run_baseline
 
 KNOBS = {

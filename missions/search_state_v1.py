@@ -69,7 +69,7 @@ RETURN_RESERVE = 0.1
 BINGO_RESERVE_S = 20.0
 """The bingo call, a decision event, comes on the step after which the way home at full speed would leave no more
 than this (s): the last decision that can still bring the drone home (the scripted searchers turn home with the
-same reserve, ``policies.env.baselines_v1.TUNED``). Later, the next decision may come too late."""
+same reserve, ``missions.searchers.TUNED``). Later, the next decision may come too late."""
 IDENTIFY_STREAM = np.uint64(0x1D5EED)
 """Mixed into the episode seed for the identification draws: a stream of their own beside the detections'."""
 

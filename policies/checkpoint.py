@@ -27,7 +27,7 @@ CHECKPOINT = "checkpoint.pt"
 
 MOVED_MODULES = {"policies.env_core": "policies.env.core", "policies.ambiguous_env": "policies.env.task_v1",
                  "policies.env.ambiguous": "policies.env.task_v1",
-                 "policies.env.baselines": "policies.env.baselines_v1",
+                 "policies.env.baselines": "missions.searchers",
                  "missions.search_state": "missions.search_state_v0",
                  "missions.belief_search": "missions.search_state_v1", "missions.signing": "mavlink_signing"}
 """Where the classes of a pickled environment live now, for checkpoints written with an earlier module layout (their

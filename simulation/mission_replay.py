@@ -22,10 +22,9 @@ from pathlib import Path
 from typing import Callable
 
 from autonomy.estimator import PoseEstimator
-from autonomy.policy import Policy
 from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
 from autonomy.runner import MissionRunner, RunnerConfig
-from autonomy.search_pilot import SearchPilot
+from autonomy.search_pilot import FlownPolicy, SearchPilot
 from autonomy.vehicle_link import COMPANION_COMPONENT, VehicleLink
 from missions.geodesy import GeoPoint
 from missions.mission import Mission
@@ -81,7 +80,7 @@ def airframe_for(mission: Mission) -> MultirotorParams:
                                battery_capacity_wh=max(base.battery_capacity_wh, 1.5 * power_w * seconds / 3600.0))
 
 
-def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | None = None, video: bool = True,
+def replay_mission(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path | None = None, video: bool = True,
                    config: RunnerConfig = RunnerConfig(), vehicle_config: VehicleConfig | None = None,
                    say: Callable[[str], None] = lambda text: None, simulated_policy_s: float = 0.0,
                    link_faults: LinkFaults | None = None, limits: FlyawayLimits = FlyawayLimits(),
@@ -102,7 +101,7 @@ def replay_mission(mission: Mission, policy: Policy, seed: int = 0, out: Path | 
     vehicle = SimulatedVehicle(vehicle_config, links, on_event=lambda event: watch.on_vehicle_event(event))
     watch = FlightWatch(vehicle, mission, limits)
     clock = VehicleClock(vehicle, watch.observe)
-    run_facts = dict(policy=str(policy.path), policy_sha256=policy.sha256, seed=seed, clock="lockstep",
+    run_facts = dict(**policy.describe(), seed=seed, clock="lockstep",
                      link_faults=link_faults.describe() if link_faults is not None else "none")
     tlog = pictures = None
     if out is not None:

@@ -1,8 +1,8 @@
 """Many mission replays (one per seed) spread over worker processes or a Ray cluster.
 
-A replay is a pure function of (mission, policy artifact, seed, options): lockstep simulated time, seeded
+A replay is a pure function of (mission, pilot, seed, options): lockstep simulated time, seeded
 sensor noise and detections. So each episode is one task, run wherever there is a free CPU, and its tlog and
-report are byte-identical to the serial run's. Workers load the artifact from its path (once per process) and
+report are byte-identical to the serial run's. Workers load the pilot (an artifact from its path, once per process) and
 write their episode's folder themselves, so on a multi-node cluster both the artifact and the output folder
 must be on a filesystem every node sees (docs/scaling.md).
 """
@@ -13,11 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from autonomy.policy import Policy, load_policy
+from autonomy.pilots import PilotChoice
+from autonomy.search_pilot import FlownPolicy
 from missions.mission import Mission
 from simulation.worker_pool import PoolConfig, run_tasks
 
-_loaded: dict[str, Policy] = {}  # artifact path -> policy, per worker process
+_loaded: dict[str, FlownPolicy] = {}  # artifact path -> policy, per worker process
 
 
 @dataclass(frozen=True)
@@ -26,8 +27,9 @@ class ReplayEpisode:
 
     mission: Mission
     """The mission flown."""
-    policy_path: str
-    """Path of the exported policy artifact (loaded by the worker; reported as given)."""
+    pilot: PilotChoice
+    """What flies: a policy artifact (loaded by the worker from its path, reported as given) or a scripted
+    searcher."""
     seed: int
     """Seed of the vehicle's sensor noise and of the simulated camera's detections."""
     out: Path | None
@@ -45,9 +47,12 @@ def replay_episode(episode: ReplayEpisode) -> dict:
     from simulation.mission_replay import replay_mission
 
     speak_mavlink2()
-    policy = _loaded.get(episode.policy_path)
-    if policy is None:
-        policy = _loaded[episode.policy_path] = load_policy(episode.policy_path)
+    if episode.pilot.policy is None:
+        policy = episode.pilot.load()  # a scripted searcher keeps the state of one flight: a fresh one each
+    else:
+        policy = _loaded.get(episode.pilot.policy)
+        if policy is None:
+            policy = _loaded[episode.pilot.policy] = episode.pilot.load()
     say = print if episode.narrate else _silent
     return replay_mission(episode.mission, policy, seed=episode.seed, out=episode.out, video=episode.video, say=say,
                           **episode.options)

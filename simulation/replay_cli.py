@@ -77,7 +77,7 @@ def parse_start_time(text: str) -> datetime:
 def _replay(mission, policy, args, out: Path, prog: str) -> int:
     # Each seed is one task (the same replay whether it runs here, in a worker process or on a Ray node).
     options = dict(signing_key=args.key, link_faults=args.faults, start_time=args.start)
-    episodes = [ReplayEpisode(mission, args.policy, args.seed + episode,
+    episodes = [ReplayEpisode(mission, args.choice, args.seed + episode,
                               out if args.episodes == 1 else out / f"seed-{args.seed + episode:05d}",
                               video=not args.no_video, narrate=args.episodes == 1 and not args.quiet, options=options)
                 for episode in range(args.episodes)]
@@ -102,7 +102,7 @@ def _replay(mission, policy, args, out: Path, prog: str) -> int:
     wall = time.perf_counter() - started
     simulated = sum(r["flight_time_s"] for r in reports)
     successes = sum(r["success"] for r in reports)
-    print(f"{mission.name}: {successes}/{len(reports)} searches found the victim "
+    print(f"{mission.name} ({policy.describe()['pilot']}): {successes}/{len(reports)} searches found the victim "
           f"({simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time)")
     if len(reports) == 1:
         r = reports[0]

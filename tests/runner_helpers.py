@@ -110,12 +110,12 @@ VEHICLE_UP_FIRST_S = 5.0
 the runner meets an autopilot whose clock is far ahead of its own, as on a real vehicle."""
 
 
-def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str = "px4", runner: list | None = None
-                             ) -> tuple[subprocess.CompletedProcess, str, dict]:
+def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str = "px4", runner: list | None = None,
+                             pilot: str | None = None) -> tuple[subprocess.CompletedProcess, str, dict]:
     """A short mission flown by ``hrlsac mission run`` against ``hrlsac sitl`` as its own process (started
     VEHICLE_UP_FIRST_S earlier, with PX4's or ArduPilot's own default stream rates), over real UDP in real time;
     returns the command's result, the vehicle's log and the mission report. ``runner``: the ``hrlsac`` command
-    that flies (default: this checkout's)."""
+    that flies (default: this checkout's); ``pilot``: a scripted searcher flies instead of ``policy``."""
     mission = small_mission(altitude_m=10.0, max_steps=10)
     path = tmp_path / "short.yaml"
     save_mission(mission, path)
@@ -130,7 +130,8 @@ def fly_against_sitl_process(policy, tmp_path: Path, *extra: str, autopilot: str
     try:
         time.sleep(VEHICLE_UP_FIRST_S)
         assert sitl.poll() is None, sitl.communicate()
-        result = subprocess.run([*(runner or HRLSAC), "mission", "run", str(path), "--policy", str(policy.path),
+        flown = ["--pilot", pilot] if pilot else ["--policy", str(policy.path)]
+        result = subprocess.run([*(runner or HRLSAC), "mission", "run", str(path), *flown,
                                  "--connect", f"udpin:127.0.0.1:{api_remote}", "--out", str(tmp_path / "out"),
                                  "--accept-flight-mismatch", *extra], capture_output=True, text=True, timeout=240)
     finally:

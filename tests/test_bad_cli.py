@@ -84,7 +84,7 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
                (["info"], "the following arguments are required: artifact"),
                (["bogus"], "argument COMMAND: invalid choice: 'bogus'"),
                (["info", POLICY, "--bogus"], "unrecognized arguments: --bogus")],
-    "mission": [(["replay", MISSION], "the following arguments are required: --policy"),
+    "mission": [(["replay", MISSION], "one of the arguments --policy --pilot is required"),
                 (["replay", MISSING, "--policy", POLICY], f"{MISSING}: file not found"),
                 (["replay", MISSION, "--policy", MISSING], f"{MISSING}: no such file"),
                 (["replay", MISSION, "--policy", POLICY, "--episodes", "0"],

@@ -18,7 +18,7 @@ from decision_ceiling import KnownVictim, NeighbourhoodGreedy, TruthfulPlausibil
 from missions.generator import TASK_V1  # noqa: E402
 from missions.mission import FlightSettings  # noqa: E402
 from missions.search_state_v1 import REJECTED  # noqa: E402
-from policies.env.baselines_v1 import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
+from missions.searchers import TUNED, GreedyBayes, LookaheadBayes  # noqa: E402
 
 EPISODES = 40
 MANY_DECOYS = dataclasses.replace(TASK_V1, decoys_min=6, decoys_max=10, decoy_spread_sigmas=1.0)

@@ -206,7 +206,7 @@ def test_mission_replay_command_prints_a_summary_and_writes_the_report(policy, m
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "report.json").read_text())
     assert [t["to"] for t in report["transitions"]][-1] == "DONE" and report["seed"] == 2
-    assert f"small: {int(report['success'])}/1 searches found the victim" in result.stdout
+    assert f"small (hrl-sac): {int(report['success'])}/1 searches found the victim" in result.stdout
     assert f"report: {tmp_path / 'report.json'}" in result.stdout
     assert "SEARCH -> RTL" in result.stdout  # the transitions, with their reasons
     assert result.stdout.splitlines()[0] == "[    0.00 s] -> CONNECT: start" and "None" not in result.stdout

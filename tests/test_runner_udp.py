@@ -27,11 +27,13 @@ def policy(tmp_path_factory) -> Policy:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
-def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path, autopilot):
+@pytest.mark.parametrize("autopilot, pilot", [("px4", None), ("ardupilot", None), ("px4", "lookahead_bayes")])
+def test_mission_run_flies_hrlsac_sitl_over_real_udp_in_real_time(policy, tmp_path, autopilot, pilot):
+    """The policy artifact on both autopilots, and the best scripted searcher (``--pilot``) on PX4."""
     started = time.time()
-    _, _, report = fly_against_sitl_process(policy, tmp_path, autopilot=autopilot)
+    _, _, report = fly_against_sitl_process(policy, tmp_path, autopilot=autopilot, pilot=pilot)
     assert [t["to"] for t in report["transitions"]] == ALL_STATES
+    assert report["pilot"] == (pilot or "hrl-sac")
     assert report["autopilot"] == {"px4": "PX4", "ardupilot": "ArduPilot Copter"}[autopilot]
     assert report["clock"] == "wall" and report["estimator"]["accepted"] > 100
     # The vehicle's clock is 600 s plus the head start ahead of the runner's: one time base all the same.

@@ -24,6 +24,7 @@ from cli_harness import run_cli
 from hypothesis import given
 from hypothesis import strategies as st
 
+from autonomy.pilots import PilotChoice
 from missions.mission import FlightSettings, Mission
 from missions.mission_file import load_mission
 from missions.mission_writer import save_mission
@@ -327,7 +328,7 @@ def test_replay_with_workers_gives_the_serial_reports_and_tlogs(ray_instance, tm
     assert sorted(serial) == [f"seed-0000{s}/{f}" for s in (4, 5, 6) for f in ("flight.tlog", "report.json")]
     assert replay_outputs(tmp_path / "processes") == serial
     mission = load_mission(tmp_path / "small.yaml")
-    episodes = [ReplayEpisode(mission, str(PRETRAINED), seed, tmp_path / "ray" / f"seed-{seed:05d}",
+    episodes = [ReplayEpisode(mission, PilotChoice(policy=str(PRETRAINED)), seed, tmp_path / "ray" / f"seed-{seed:05d}",
                               video=False) for seed in (4, 5, 6)]
     reports = replay_episodes(episodes, PoolConfig(workers=2, ray_address="local"))
     assert replay_outputs(tmp_path / "ray") == serial

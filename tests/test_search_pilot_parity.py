@@ -23,6 +23,12 @@ class ScriptedArtifact:
         self.seen: list[np.ndarray] = []
         self.action_frame = action_frame  # what an artifact's manifest carries in its training_config
 
+    def attach(self, state) -> None:
+        """An artifact acts on the observation alone."""
+
+    def describe(self) -> dict:
+        return {"pilot": "scripted artifact"}
+
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         return np.full(meta_obs.shape[:-1], TRACK_OBJECT)
 

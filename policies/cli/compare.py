@@ -46,13 +46,13 @@ def main(argv: list[str], prog: str = "hrlsac compare") -> int:
             raise CompareError(f"--streams must be >= 1, got {args.streams}")
         scripted = None
         if args.scripted is not None:
-            from policies.env.baselines_v1 import BASELINES
+            from missions.searchers import SEARCHERS
 
             scripted = [name.strip() for name in args.scripted.split(",") if name.strip()]
-            unknown = [name for name in scripted if name not in BASELINES]
+            unknown = [name for name in scripted if name not in SEARCHERS]
             if unknown or not scripted:
                 raise CompareError(f"--scripted: no scripted searcher {unknown[0] if unknown else args.scripted!r}; "
-                                   f"choose from {', '.join(BASELINES)}")
+                                   f"choose from {', '.join(SEARCHERS)}")
         generator = scenarios = None
         if args.generator is not None:
             from pathlib import Path

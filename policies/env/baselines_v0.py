@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from missions import search
-from policies.env.baselines_v1 import fly_straight
+from missions.searchers import fly_straight
 
 if TYPE_CHECKING:
     from policies.env.task_v0 import SarSearchBatch

@@ -71,10 +71,10 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     SarSearch-v1 runs also get the rows of ``policies.reports.groups`` (scripted searchers over ``streams``
     detection streams, constant goals, IQM, P(found by t)); ``generator`` (a GeneratorConfig) with ``scenarios``
     (the name ``hrlsac evaluate --generator`` gave the eval files) compares on that distribution instead;
-    ``scripted`` names the scripted searchers to fly (default: all of ``policies.env.baselines_v1.BASELINES``).
+    ``scripted`` names the scripted searchers to fly (default: all of ``missions.searchers.SEARCHERS``).
     """
     from policies.env.baselines_v0 import BASELINES_V0
-    from policies.env.baselines_v1 import BASELINES
+    from missions.searchers import SEARCHERS
     from policies.reports import groups as compare_groups
 
     progress = sys.stderr if progress is True else (progress or None)
@@ -89,7 +89,7 @@ def compare(runs: list, out, split: str = "test", episodes: int | None = None, e
     if out.exists() and not out.is_dir():
         raise CompareError(f"--out {out}: exists and is not a folder")
     to_evaluate = [run for run in loaded if run.metrics is None or int(run.metrics["episodes"]) != episodes]
-    flown = (len(to_evaluate) + (len(scripted or BASELINES) * streams if task == "SarSearch-v1" else
+    flown = (len(to_evaluate) + (len(scripted or SEARCHERS) * streams if task == "SarSearch-v1" else
                                  len(BASELINES_V0))) * episodes
     with progress_bar(flown, "episode", "comparing", enabled=progress is not None, stream=progress) as bar:
         for i, run in enumerate(loaded, 1):

@@ -2,7 +2,7 @@
 detection streams, every constant goal under each HRL-SAC run's learned low level, the rliable-style aggregates
 (``policies.evaluation.aggregate``), P(found by t), and the verdicts of HRL-SAC against every other row.
 
-* **scripted searchers** (``policies.env.baselines_v1``, the settings tuned on val): each flies the same scenarios once
+* **scripted searchers** (``missions.searchers``, the settings tuned on val): each flies the same scenarios once
   per stream k = 0 .. streams-1 (the same scenarios with other detection draws, ``episode_batch``'s ``stream``):
   its runs, as the seeds are a learned method's;
 * **constant goals**: ``hrlsac evaluate RUN --constant-goal GOAL`` writes ``eval_<split>[_<scenarios>]_goal-<GOAL>
@@ -35,11 +35,11 @@ def scripted_rows(task: str, split: str, episodes: int, flight, streams: int, en
                   names: Sequence[str] | None = None) -> tuple[list[dict], dict[str, dict]]:
     """Each scripted searcher's row (``names``, default all) over ``streams`` detection streams, and its first
     stream's metrics (figures); ``bar`` (``policies.reports.progress``) follows their episodes."""
-    from policies.env.baselines_v1 import BASELINES
+    from missions.searchers import SEARCHERS
     from policies.evaluation.baselines import run_baseline
 
     rows, first = [], {}
-    for name in names or BASELINES:
+    for name in names or SEARCHERS:
         runs = []
         for stream in range(streams):
             bar.set_description(f"{name}, stream {stream + 1}/{streams}", refresh=False)

@@ -2,17 +2,14 @@
 its options forward in the crew's own belief, the strongest of the scripted searchers (docs/results.md)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from missions import belief as belief_logic
 from missions import goals as goal_logic
 from missions import search
-from policies.env.scripted_v1 import GreedyBayes, ScriptedSettings
+from missions.search_state_v1 import BeliefSearchState
+from missions.searchers.rules import GreedyBayes, ScriptedSettings
 
-if TYPE_CHECKING:
-    from policies.env.task_v1 import AmbiguousSearchBatch
 
 
 def box_sum(belief: np.ndarray, cells: int) -> np.ndarray:
@@ -55,7 +52,7 @@ class LookaheadBayes(GreedyBayes):
 
     REGION_CELLS = 2
 
-    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+    def __init__(self, core: BeliefSearchState, settings: ScriptedSettings = ScriptedSettings()):
         super().__init__(core, settings)
         self.horizon_steps = max(1, int(round(settings.lookahead_s / core.flight.step_period_s)))
 

@@ -1,20 +1,19 @@
 """What every SarSearch-v1 scripted searcher shares (:class:`ScriptedSearch`: the rules around its search pattern,
-module ``policies.env.baselines_v1``), its settings (:class:`ScriptedSettings`) and greedy Bayes, which the lookahead
-planner (``policies.env.lookahead_v1``) builds on. The searchers use what a crew knows, never the hidden victim."""
+package ``missions.searchers``), its settings (:class:`ScriptedSettings`) and greedy Bayes, which the lookahead
+planner (``missions.searchers.lookahead``) builds on. The searchers use what a crew knows, never the hidden victim."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
 from missions import goals as goal_logic
 from missions.action_frames import arrival_speed_fraction
+from missions.search_state_v1 import BeliefSearchState
 from missions.sweep_width import sweep_width_m
 from missions.validation import check_fields
 
-if TYPE_CHECKING:
-    from policies.env.task_v1 import AmbiguousSearchBatch
 
 
 def fly_straight(position: np.ndarray, goal: np.ndarray, flight, zoom: float | np.ndarray,
@@ -67,7 +66,7 @@ class ScriptedSettings:
 class ScriptedSearch:
     """The shared rules (module docstring) around a search point that each pattern supplies."""
 
-    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+    def __init__(self, core: BeliefSearchState, settings: ScriptedSettings = ScriptedSettings()):
         self.core, self.settings = core, settings
         self.going_home = np.zeros(core.n, dtype=bool)
         self.started = np.full(core.n, -1, dtype=np.int64)  # the episode (by seed) each slot was planned for
@@ -115,7 +114,7 @@ class ScriptedSearch:
 class GreedyBayes(ScriptedSearch):
     """The cell with the most belief per travel time, kept until reached or half searched (module docstring)."""
 
-    def __init__(self, core: "AmbiguousSearchBatch", settings: ScriptedSettings = ScriptedSettings()):
+    def __init__(self, core: BeliefSearchState, settings: ScriptedSettings = ScriptedSettings()):
         super().__init__(core, settings)
         self.cell = np.full(core.n, -1, dtype=np.int64)
         self.cell_belief = np.zeros(core.n)
