@@ -27,7 +27,7 @@ def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.Argumen
     pilot.add_argument("--policy", metavar="FILE", help="policy artifact written by 'hrlsac export'")
     pilot.add_argument("--pilot", metavar="NAME",
                        help=f"fly a scripted searcher instead of a policy artifact: {', '.join(SEARCHERS)} "
-                            f"({BEST_SEARCHER} finds the victim most often: docs/results.md)")
+                            f"({BEST_SEARCHER} measures best: docs/results.md)")
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default: {DEFAULT_OUT}/MISSION-NAME)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the simulated camera's detections (and of the vehicle's sensor noise)")

@@ -47,10 +47,8 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--split", default="test", choices=["train", "val", "test"])
     parser.add_argument("--workers", type=int, default=1, help="local processes flying the replays")
-    parser.add_argument("--out", default=None, help="report file (default benchmarks/results/sim_to_sitl.json, "
-                                                      "or sim_to_sitl_NAME.json for --pilot NAME)")
+    parser.add_argument("--out", default=results_file("sim_to_sitl.json"))
     args = parser.parse_args()
-    args.out = args.out or results_file(f"sim_to_sitl_{args.pilot}.json" if args.pilot else "sim_to_sitl.json")
     torch.set_num_threads(1)
     choice = PilotChoice(scripted=args.pilot) if args.pilot else PilotChoice(policy=args.policy)
     started = time.perf_counter()
@@ -117,7 +115,8 @@ def main() -> int:
     write_report(args.out, {**identity, "split": args.split,
                             "episodes": args.episodes, "workers": args.workers, **results, "gap_points": gap,
                             "same_outcome": agree,
-                            "replay_ends": ends, "wall_s": {"environment": env_seconds, "replay": replay_seconds}})
+                            "replay_ends": ends, "replay_success_per_scenario": [int(s) for s in replay_success],
+                            "wall_s": {"environment": env_seconds, "replay": replay_seconds}})
     return 0
 
 

@@ -1,5 +1,5 @@
 """SarSearch-v1's lookahead planner (:class:`LookaheadBayes`): greedy Bayes that chooses each next cell by flying
-its options forward in the crew's own belief, the strongest of the scripted searchers (docs/results.md)."""
+its options forward in the crew's own belief (how it compares with greedy Bayes: docs/results.md)."""
 from __future__ import annotations
 
 import numpy as np
