@@ -20,10 +20,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/hrlsac mission replay missions/library/demo.yaml --policy policies/pretrained/hrl-sac.pt
 
-# One worker per core plus two (at most 4), whole test files per worker so that module fixtures are built once:
+# One worker per core plus three (at most 5), whole test files per worker so that module fixtures are built once:
 # much of the suite waits on real time (UDP flights at 1x, subprocesses starting), and the extra workers fill that.
 # The files go out in collection order, the longest first (tests/conftest.py), not reordered by test count.
-WORKERS := $(shell $(PYTHON) -c "import os; print(min(4, (os.cpu_count() or 1) + 2))")
+WORKERS := $(shell $(PYTHON) -c "import os; print(min(5, (os.cpu_count() or 1) + 3))")
 test: lint
 	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile --no-loadscope-reorder
 
