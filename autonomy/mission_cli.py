@@ -1,7 +1,8 @@
-"""``hrlsac mission run MISSION.yaml --policy P.pt --connect URL``: fly a search mission with an exported policy
-against any MAVLink vehicle (PX4 SITL, a real autopilot, ``hrlsac sitl``) in real time, the policy in its own
-thread. The arguments and checks every ``hrlsac mission`` subcommand shares are here too; the lockstep replay
-in the simulated vehicle (``hrlsac mission replay``) is ``simulation.replay_cli``.
+"""``hrlsac mission run MISSION.yaml --policy P.pt | --pilot NAME --connect URL``: fly a search mission with an
+exported policy or a scripted searcher against any MAVLink vehicle (PX4 SITL, a real autopilot, ``hrlsac sitl``) in
+real time, the pilot's decisions in their own thread. The arguments and checks every ``hrlsac mission`` subcommand
+shares are here too; the lockstep replay in the simulated vehicle (``hrlsac mission replay``) is
+``simulation.replay_cli``.
 """
 from __future__ import annotations
 

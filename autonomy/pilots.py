@@ -15,7 +15,7 @@ import numpy as np
 
 from autonomy.search_pilot import FlownPolicy
 from missions.search_state_v1 import BeliefSearchState
-from missions.searchers import SEARCHERS, TUNED, RandomSearch, ScriptedSettings
+from missions.searchers import SEARCHERS, TUNED, ScriptedSettings, make_searcher
 
 
 class ScriptedPilot:
@@ -34,10 +34,8 @@ class ScriptedPilot:
         self._searcher = None
 
     def attach(self, state: BeliefSearchState) -> None:
-        if SEARCHERS[self.name] is RandomSearch:  # seeded by the mission's seed, as the environment's episode
-            self._searcher = RandomSearch(state, self.settings, seed=int(state.episode_seed[0]))
-        else:
-            self._searcher = SEARCHERS[self.name](state, self.settings)
+        # the random searcher draws from the mission's seed
+        self._searcher = make_searcher(self.name, state, self.settings, seed=int(state.episode_seed[0]))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         raise TypeError(f"the scripted searcher {self.name} chooses no goals")

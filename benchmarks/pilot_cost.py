@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import torch
-from common import results_file, write_report
+from common import ROOT, results_file, write_report
 
 from autonomy.pilots import ScriptedPilot
 from autonomy.policy import load_policy
@@ -25,7 +25,6 @@ from missions.generator import TASK_V1, generate_scenario, scenario_seeds
 from missions.mission import FlightSettings, Mission
 from policies.cli.evaluate import read_generator_config
 
-ROOT = __file__.rsplit("/benchmarks/", 1)[0]
 PILOTS = ("hrl-sac", "greedy_bayes", "lookahead_bayes")
 
 

@@ -32,7 +32,7 @@ from common import results_file, write_report
 from autonomy.pilots import PilotChoice
 from autonomy.policy import load_policy
 from missions.mission import FlightSettings, Mission
-from missions.searchers import SEARCHERS, TUNED, ScriptedSettings
+from missions.searchers import SEARCHERS, make_searcher
 from policies.evaluation.episodes import episode_batch, run_episodes
 from policies.evaluation.stats import wilson_interval
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
@@ -58,9 +58,7 @@ def main() -> int:
 
         def fly_environment(flight_rules: bool) -> dict:
             batch = episode_batch(args.split, args.episodes, flight, goal_conditioned=False, **environment)
-            settings = TUNED.get(args.pilot, ScriptedSettings())
-            searcher = (SEARCHERS[args.pilot](batch, settings, seed=0) if args.pilot == "random"
-                        else SEARCHERS[args.pilot](batch, settings))
+            searcher = make_searcher(args.pilot, batch)
             return run_episodes(batch, lambda _batch: searcher.act(), flight_rules=flight_rules)
     else:
         policy = load_policy(args.policy)

@@ -15,7 +15,7 @@ from autonomy.pilots import PilotChoice, ScriptedPilot
 from autonomy.search_pilot import SearchPilot
 from missions.mission import Mission
 from missions.scenario import Scenario, SearchArea, Target
-from missions.searchers import SEARCHERS, TUNED, ScriptedSettings
+from missions.searchers import TUNED, make_searcher
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "missions" / "library" / "demo.yaml"
@@ -32,8 +32,7 @@ def test_a_scripted_pilot_acts_as_its_searcher_does_in_the_environment(name):
                         datum_sigma_m=60.0, endurance_s=500.0, name="shared",
                         targets=(Target("person", 330.0, 80.0, primary=True), Target("boat", 280.0, -60.0)))
     env = make_batch(SarSearchConfig(scenarios=(scenario,), goal_conditioned=False), [7])
-    settings = TUNED.get(name, ScriptedSettings())
-    searcher = SEARCHERS[name](env, settings, seed=7) if name == "random" else SEARCHERS[name](env, settings)
+    searcher = make_searcher(name, env, seed=7)
     pilot = SearchPilot(Mission(scenario=scenario), ScriptedPilot(name), seed=7, bingo_failsafe_s=None)
     for step in range(600):
         decision = pilot.decide(env.position[0].copy())
@@ -45,10 +44,10 @@ def test_a_scripted_pilot_acts_as_its_searcher_does_in_the_environment(name):
         assert not truncated[0]
     else:
         raise AssertionError("the search did not end within 600 steps")
-    ended = {"victim reached": info["success"][0], "returned home": info.get("returned", [False])[0]}
-    assert terminated[0] and decision.end in ("victim reached", "returned home", "endurance exhausted")
-    if decision.end in ended:
-        assert ended[decision.end]
+    # the environment ended the same step, for the same reason
+    ended = {"victim reached": info["success"][0], "returned home": info["returned"][0],
+             "endurance exhausted": info["ran_dry"][0]}
+    assert terminated[0] and decision.end in ended and ended[decision.end]
     assert step > 20  # a search, not an immediate end
 
 

@@ -36,13 +36,14 @@ from __future__ import annotations
 
 from typing import Callable
 
+from missions.search_state_v1 import BeliefSearchState
 from missions.searchers.lookahead import LookaheadBayes, box_sum, top_cells
 from missions.searchers.patterns import ExpandingSquare, ParallelTrack, RandomSearch, WaypointPattern
 from missions.searchers.rules import GreedyBayes, ScriptedSearch, ScriptedSettings, fly_straight
 
-__all__ = ["BEST_SEARCHER", "SEARCHERS", "TUNED", "ExpandingSquare", "GreedyBayes", "LookaheadBayes", "ParallelTrack",
-           "RandomSearch", "ScriptedSearch", "ScriptedSettings", "WaypointPattern", "box_sum", "fly_straight",
-           "top_cells"]
+__all__ = ["BEST_SEARCHER", "SEARCHERS", "TUNED", "make_searcher", "ExpandingSquare", "GreedyBayes", "LookaheadBayes",
+           "ParallelTrack", "RandomSearch", "ScriptedSearch", "ScriptedSettings", "WaypointPattern", "box_sum",
+           "fly_straight", "top_cells"]
 
 
 SEARCHERS: dict[str, Callable[..., object]] = {
@@ -55,7 +56,7 @@ SEARCHERS: dict[str, Callable[..., object]] = {
 """SarSearch-v1's scripted searchers by name; each takes (core, settings)."""
 BEST_SEARCHER = "greedy_bayes"
 """The scripted searcher to fly: on the calibrated map it finds the victim as often as the lookahead planner (paired on
-the same val scenarios, at 1 km and 2 km) for a fraction of its compute per decision (docs/results.md)."""
+the same val scenarios, at 1 km and 2 km) at a fraction of the lookahead's slowest decisions (docs/results.md)."""
 
 
 TUNED: dict[str, ScriptedSettings] = {
@@ -79,3 +80,11 @@ TUNED: dict[str, ScriptedSettings] = {
         lookahead_s=60.0, lookahead_options=6),
 }
 """Each searcher's settings as chosen on the val split (``benchmarks/tune_baselines.py``); absent: the defaults."""
+
+
+def make_searcher(name: str, core: BeliefSearchState, settings: ScriptedSettings | None = None, seed: int = 0):
+    """The searcher ``name`` on ``core``, with ``settings`` (default: its tuned ones, ``TUNED``); ``seed`` seeds the
+    random searcher's actions (the others draw nothing)."""
+    if SEARCHERS[name] is RandomSearch:
+        return RandomSearch(core, seed=seed)
+    return SEARCHERS[name](core, settings or TUNED.get(name, ScriptedSettings()))

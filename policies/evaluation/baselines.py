@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Callable
 
 from missions.mission import FlightSettings
-from missions.searchers import SEARCHERS, TUNED, ScriptedSettings
+from missions.searchers import ScriptedSettings, make_searcher
 from policies.env.baselines_v0 import BASELINES_V0
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -19,10 +19,8 @@ def run_baseline(name: str, split: str = "test", episodes: int = 200, flight: Fl
     core = episode_batch(split, episodes, flight, goal_conditioned=False, task=task, stream=stream, **environment)
     if task == "SarSearch-v0":
         policy = BASELINES_V0[name](core, seed) if name == "random" else BASELINES_V0[name](core)
-    elif name == "random":
-        policy = SEARCHERS[name](core, seed=seed)
     else:
-        policy = SEARCHERS[name](core, settings or TUNED.get(name, ScriptedSettings()))
+        policy = make_searcher(name, core, settings, seed)
     metrics = summarise(run_episodes(core, lambda _core: policy.act(), on_progress=on_progress), flight.step_period_s)
     return {"baseline": name, "split": split, "task": task, "stream": stream, "max_steps": flight.max_steps,
             **metrics}
