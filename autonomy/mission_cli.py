@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Callable
 
 from hrlsac_cli import GROUPS
+from missions.mission import Mission
 from hrlsac_cli.help_format import HelpFormatter
 from missions.searchers import BEST_SEARCHER, SEARCHERS
 
@@ -43,10 +44,10 @@ def mission_parser(prog: str, summary: str, simulated: bool) -> argparse.Argumen
     return parser
 
 
-def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argparse.Namespace], None]):
+def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argparse.Namespace, Mission], None]):
     """Load and check what a mission subcommand flies: ``(mission, policy, out)`` (``args.choice``: the
     :class:`autonomy.pilots.PilotChoice`), or an exit code after one error line. ``check`` validates the
-    subcommand's own arguments (raising ValueError)."""
+    subcommand's own arguments against the mission (raising ValueError)."""
     from autonomy.pilots import PilotChoice
     from autonomy.policy import Policy, PolicyArtifactError
     from missions.mission_file import MissionFileError, load_mission
@@ -54,14 +55,11 @@ def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argpar
 
     try:
         mission = load_mission(args.mission)
-        if mission.fleet is not None:
-            raise ValueError(f"{args.mission}: fleet: {len(mission.fleet.vehicles)} drones; this command flies one "
-                             "drone: remove the fleet section to fly the scenario with one")
         args.choice = PilotChoice(policy=args.policy, scripted=args.pilot)
         policy = args.choice.load()
         if not 0 <= args.seed <= 2**32 - 1:  # numpy seeds the sensors and the camera with it
             raise ValueError(f"--seed must be in [0, {2**32 - 1}], got {args.seed}")
-        check(args)
+        check(args, mission)
         args.key = load_key_file(args.signing_key) if args.signing_key else None
         if isinstance(policy, Policy):  # a scripted searcher flies any flight settings
             _check_flight_settings(mission, policy, args.accept_flight_mismatch, args.mission)
@@ -79,20 +77,34 @@ def prepare_mission(args: argparse.Namespace, name: str, check: Callable[[argpar
 
 def main(argv: list[str], prog: str = "hrlsac mission run") -> int:
     parser = mission_parser(prog, RUN_SUMMARY, simulated=False)
-    parser.add_argument("--connect", required=True,
-                        help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]")
+    parser.add_argument("--connect", required=True, action="append", metavar="URL",
+                        help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]; a fleet "
+                             "mission: once per drone, in the fleet's order (PX4 SITL instance N: udpin:0.0.0.0:"
+                             "14540+N)")
     parser.add_argument("--backend", choices=("pymavlink", "mavsdk"), default="pymavlink",
                         help="MAVLink client: pymavlink (records a tlog) or MAVSDK (Offboard.set_velocity_ned)")
     args = parser.parse_args(argv)
 
-    def check(args: argparse.Namespace) -> None:
+    def check(args: argparse.Namespace, mission: Mission) -> None:
         if args.signing_key and args.backend == "mavsdk":
             raise ValueError("--signing-key needs --backend pymavlink (MAVSDK's Python API cannot sign)")
+        drones = len(mission.fleet.vehicles) if mission.fleet is not None else 1
+        if len(args.connect) != drones:
+            raise ValueError(f"--connect given {len(args.connect)} times: {args.mission} flies {drones} "
+                             f"drone{'s' if drones > 1 else ''}, one --connect each" +
+                             (" (in the fleet's order)" if drones > 1 else ""))
+        if drones > 1 and args.backend == "mavsdk":
+            raise ValueError("a fleet flies with --backend pymavlink (one tlog per drone)")
 
     prepared = prepare_mission(args, prog, check)
     if isinstance(prepared, int):
         return prepared
     mission, policy, out = prepared
+    if mission.fleet is not None:
+        from autonomy.fleet_cli import run_fleet
+
+        return run_fleet(mission, policy, args, out, prog)
+    args.connect = args.connect[0]
     return _run(mission, policy, args, out, prog)
 
 

@@ -14,7 +14,7 @@ from autonomy.runner_core import RunnerCore
 def mission_report(runner: RunnerCore) -> dict:
     """The report of ``runner``'s mission so far (an ``autonomy.runner.MissionRunner``; complete once ``run()`` has
     returned)."""
-    search = runner.pilot.summary()
+    search = runner.pilot.summary(runner.fleet.row if runner.fleet is not None else 0)
     path = np.array([(n, e) for _, n, e in runner.trajectory]) if runner.trajectory else np.zeros((0, 2))
     return {
         "mission": runner.mission.name,

@@ -275,6 +275,6 @@ def _observe_belief_search(state, goal_conditioned: bool, rows: np.ndarray | Non
     put("candidate_plausibility", state.plausibility[rows][np.arange(n), nearest] * unresolved)
     put("confirmed", (kind == 2).any(axis=1))
     put("close_look", state.close_look()[rows])
-    put("altitude", state.altitude[rows] / flight.altitude_m)
+    put("altitude", state.altitude[rows] / state.search_altitude_m[rows])  # 1 at its own search altitude
     put("goal", (state.goal[rows] if goal_conditioned else np.full(n, NO_GOAL))[:, None] == _GOAL_INDICES)
     return out

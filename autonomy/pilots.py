@@ -16,6 +16,10 @@ import numpy as np
 from autonomy.search_pilot import FlownPolicy
 from missions.search_state_v1 import BeliefSearchState
 from missions.searchers import SEARCHERS, TUNED, ScriptedSettings, make_searcher
+from missions.searchers.fleet import FleetGreedyBayes
+
+FLEET_SEARCHER = "greedy_bayes"
+"""The searcher whose fleet version splits the water between the drones of a fleet (sequential greedy)."""
 
 
 class ScriptedPilot:
@@ -34,8 +38,12 @@ class ScriptedPilot:
         self._searcher = None
 
     def attach(self, state: BeliefSearchState) -> None:
-        # the random searcher draws from the mission's seed
-        self._searcher = make_searcher(self.name, state, self.settings, seed=int(state.episode_seed[0]))
+        # the random searcher draws from the mission's seed; a fleet (several rows) flies greedy Bayes split
+        # between its drones (missions.searchers.fleet), any other searcher per drone on the shared map
+        if state.n > 1 and self.name == FLEET_SEARCHER:
+            self._searcher = FleetGreedyBayes(state, self.settings)
+        else:
+            self._searcher = make_searcher(self.name, state, self.settings, seed=int(state.episode_seed[0]))
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         raise TypeError(f"the scripted searcher {self.name} chooses no goals")
@@ -43,7 +51,8 @@ class ScriptedPilot:
     def act(self, obs: np.ndarray) -> np.ndarray:
         if self._searcher is None:
             raise RuntimeError("ScriptedPilot.act before attach: the search pilot attaches its search state first")
-        return self._searcher.act()[0]
+        actions = self._searcher.act()
+        return actions[0] if np.ndim(obs) == 1 else actions  # one drone, or every row of a fleet
 
     def describe(self) -> dict:
         return {"pilot": self.name, "pilot_settings": dataclasses.asdict(self.settings)}

@@ -27,8 +27,9 @@ from autonomy.estimator import PoseEstimator
 from autonomy.link_loss import LinkLossMonitor
 from autonomy.mission_state import COMPANION_STATES, MissionState
 from autonomy.runner_config import RunnerConfig
-from autonomy.search_pilot import Decision, DecisionWorker, SearchPilot
-from autonomy.setpoints import SetpointStreamer, StreamConfig
+from autonomy.search_pilot import Decision, DecisionSource, DecisionWorker, SearchPilot
+from autonomy.separation import FleetPlace
+from autonomy.setpoints import SetpointStreamer, StreamConfig, VelocityCommand
 from autonomy.vehicle_connection import VehicleConnection
 from autonomy.vehicle_link import enum_name
 from autonomy.vehicle_time import BootTimeMap, receive_telemetry
@@ -45,16 +46,21 @@ class RunnerCore:
     def __init__(self, mission: Mission, pilot: SearchPilot, link: VehicleConnection, clock: Clock,
                  estimator: PoseEstimator, config: RunnerConfig = RunnerConfig(), threaded_policy: bool = False,
                  say: Callable[[str], None] = lambda text: None,
-                 on_decision: Callable[[Decision], None] = lambda decision: None, simulated_policy_s: float = 0.0):
+                 on_decision: Callable[[Decision], None] = lambda decision: None, simulated_policy_s: float = 0.0,
+                 fleet: FleetPlace | None = None):
         """``say`` prints transitions and events; ``on_decision`` sees every policy decision (videos);
-        ``simulated_policy_s``: in lockstep, how long a decision takes in simulated time (tests of slow policies)."""
+        ``simulated_policy_s``: in lockstep, how long a decision takes in simulated time (tests of slow policies);
+        ``fleet``: this drone's place in a fleet (``autonomy.fleet_runner``): its seat in the shared decisions, its
+        row of the shared search state and the separation kept from the others."""
         self.mission, self.pilot, self.link, self.clock, self.estimator = mission, pilot, link, clock, estimator
         self.config, self.say, self.on_decision = config, say, on_decision
         stream = StreamConfig(rate_hz=config.stream.rate_hz, stale_after_s=config.stream.stale_after_s,
                               max_horizontal_mps=mission.flight.max_speed_mps,
                               max_vertical_mps=config.stream.max_vertical_mps)
         self.streamer = SetpointStreamer(stream, link.send_velocity)
-        self.worker = DecisionWorker(pilot, threaded_policy, simulated_policy_s)
+        self.fleet = fleet
+        self.worker: DecisionSource = (fleet.seat if fleet is not None
+                                       else DecisionWorker(pilot, threaded_policy, simulated_policy_s))
         self.boot_time = BootTimeMap(config.boot_time)
         self.flavour: AutopilotFlavour = PX4  # until the vehicle's heartbeat says otherwise
         self.link_loss = LinkLossMonitor(config.link_loss, self.flavour, link.send_timesync_request)
@@ -72,6 +78,7 @@ class RunnerCore:
         self._zoom_percent: int | None = None
         self._last_decision_s = -math.inf
         self._height_target_m = mission.flight.altitude_m  # above the vehicle's home
+        self._wanted: VelocityCommand | None = None  # the latest decision's command before a fleet's shield
         self.autopilot_fence: dict | None = None  # what the preflight check found (autonomy.autopilot_fence)
         self.companion_loss: dict | None = None  # ... and what the autopilot does without us (autonomy.companion_loss)
         self._record(MissionState.CONNECT, "start")
@@ -161,6 +168,10 @@ class RunnerCore:
             raise MissionAborted(f"{what}: {name} refused ({enum_name('MAV_RESULT', result)})"
                                  + (f": {texts}" if texts else ""))
         raise MissionAborted(f"{what}: no COMMAND_ACK for {name} after {attempts} attempts")
+
+    def height_m(self) -> float:
+        """Filtered height above the vehicle's home (what a fleet's separation compares; see ``_height_m``)."""
+        return self._height_m()
 
     def _height_m(self) -> float:
         """Filtered height above the vehicle's home (HOME_POSITION), 0 before any estimate.

@@ -23,40 +23,63 @@ from autonomy.failsafes import blind_reason, judge_search
 from autonomy.geofence import guard_velocity
 from autonomy.mission_state import MissionState
 from autonomy.runner_core import MissionAborted
-from autonomy.search_pilot import Decision
+from autonomy.search_pilot import END_REASONS, Decision
+from autonomy.separation import Position, separated_velocity
 from autonomy.setpoints import HOLD, VelocityCommand
 from autonomy.takeoff_sequence import TakeoffSequence
+
+LAYER_TOLERANCE_M = 2.0
+"""A fleet drone within this of its layer's height (m) is on its layer."""
 
 
 class SearchLoop(TakeoffSequence):
     """SEARCH, and its resumption through OFFBOARD; see the module docstring."""
 
     def _search(self) -> Iterator[None]:
-        period = self.mission.flight.step_period_s
-        next_decision = self.clock.now()
+        self.worker.begin(self.clock.now(), self.mission.flight.step_period_s)
+        if not self.worker.started():  # a fleet's drones start searching together
+            self._event("fleet", "waiting for the other drones to reach their search altitudes")
+            yield from self.wait_until(self.worker.started, self.config.takeoff_timeout_s,
+                                       "the fleet's other drones at their search altitudes")
+            self._last_decision_s = self.clock.now()  # decisions start now: the wait was no policy stall
         while self.search_end is None:
             now = self.clock.now()
             blind = self._blind(now)
             if blind is not None:  # no pose to act on: stop, and decide again once it is fresh
+                self._wanted = None
                 if self.streamer.latest != HOLD:
                     self.streamer.command(HOLD, now)
                     if self.link_loss.left_companion_s is None:  # a settling mode change says so itself
                         self._event("link", f"{blind}: holding position")
-            elif now + 1e-9 >= next_decision and not self.worker.busy:
+            elif self.worker.due(now):
                 pose = self.estimator.predict_to(now)
                 self.trajectory.append((round(now, 3), float(pose.position_ned[0]), float(pose.position_ned[1])))
                 self.worker.submit(pose.position_ned[:2].copy(), now)
-                # One period after the scheduled decision; a decision that came late (slow policy) skips the
-                # missed periods instead of a burst of back-to-back decisions, each counted as a full step.
-                next_decision += period
-                if next_decision <= now:
-                    next_decision = now + period
             decision = self.worker.poll(now)
             if decision is not None and self._blind(now) is None:
                 yield from self._apply(decision, now)
             yield from self._check_failsafes(now)
             if self.search_end is None:
+                self._keep_apart(now)
                 yield from self.tick()
+        if self.fleet is not None and self.search_end in END_REASONS:
+            yield from self._climb_to_layer()
+
+    def _climb_to_layer(self) -> Iterator[None]:
+        """A fleet drone climbs back to its own layer before RTL (a close look may have taken it down): the
+        autopilot returns at the altitude it is at, so the drones fly home on their layers."""
+        target = self.mission.flight.altitude_m
+        if abs(self._height_m() - target) <= LAYER_TOLERANCE_M:
+            return
+        self._event("fleet", f"climbing back to its layer ({target:g} m) before RTL")
+        self._height_target_m = target
+        give_up = self.clock.now() + self.config.takeoff_timeout_s
+        while abs(self._height_m() - target) > LAYER_TOLERANCE_M and self.clock.now() < give_up:
+            now = self.clock.now()
+            if self._blind(now) is not None or self.link.flight_mode != self.flavour.companion_mode:
+                return  # RTL at once: the autopilot's own return is the safer way home now
+            self.streamer.command(self._separated(VelocityCommand(0.0, 0.0, self._altitude_hold()), now), now)
+            yield from self.tick()
 
     def _blind(self, now: float) -> str | None:
         return blind_reason(now, self.link_loss, self.estimator, self.config.link_loss.gap_s)
@@ -64,6 +87,7 @@ class SearchLoop(TakeoffSequence):
     def _apply(self, decision: Decision, now: float) -> Iterator[None]:
         self.decisions.append(decision)
         self.on_decision(decision)
+        self._wanted = None
         if decision.end is not None:
             self.search_end = decision.end
             self.streamer.command(HOLD, now)
@@ -82,8 +106,30 @@ class SearchLoop(TakeoffSequence):
         # A close look may ask for another height (Decision.altitude_m); None: the mission's search altitude.
         wanted = decision.altitude_m
         self._height_target_m = self.mission.flight.altitude_m if wanted is None else float(wanted)
-        self.streamer.command(VelocityCommand(vn, ve, self._altitude_hold()), now)
+        self._wanted = VelocityCommand(vn, ve, self._altitude_hold())
+        self.streamer.command(self._separated(self._wanted, now), now)
         self._set_zoom(decision.zoom)
+
+    def _separated(self, command: VelocityCommand, now: float) -> VelocityCommand:
+        """``command`` through the fleet's separation shield (``autonomy.separation``); alone: unchanged."""
+        if self.fleet is None:
+            return command
+        pose = self.estimator.predict_to(now)
+        north, east, down = (float(v) for v in pose.position_ned)
+        own = Position(self.fleet.name, north, east, -down, float(pose.velocity_ned[0]), float(pose.velocity_ned[1]))
+        shielded = separated_velocity(own, command, self.fleet.others(), self.fleet.rule,
+                                      self.mission.flight.max_speed_mps)
+        if shielded != command:
+            self.fleet.shielded += 1
+        return shielded
+
+    def _keep_apart(self, now: float) -> None:
+        """Between decisions, the latest command shielded again against where the other drones are now."""
+        if self.fleet is None or self._wanted is None:
+            return
+        shielded = self.streamer.clamp(self._separated(self._wanted, now))
+        if shielded != self.streamer.latest:
+            self.streamer.amend(shielded)
 
     def _check_failsafes(self, now: float) -> Iterator[None]:
         """Act on ``autonomy.failsafes.judge_search``: wait for lost telemetry (said once), end or resume."""

@@ -43,9 +43,9 @@ from missions.search import ScenarioBatch
 from missions.shield import shield_velocity
 
 END_REASONS = ("victim reached", "return to base", "returned home", "bingo failsafe", "endurance exhausted",
-               "step limit", "entered a danger zone", "left the geofence")
+               "step limit", "entered a danger zone", "left the geofence", "victim reached by another drone")
 """Why a search ends (``Decision.end``); "victim reached" is the one success: the victim confirmed by a close look
-and within the reach radius."""
+and within the reach radius; in a fleet, the others' searches then end with "victim reached by another drone"."""
 BINGO_FAILSAFE_S = 10.0
 """The pilot ends the search ("bingo failsafe"; the runner's RTL then flies home) once flying home at full speed
 would leave no more than this of the sortie's endurance, whatever the policy chose. The meta-controller had its
@@ -112,27 +112,36 @@ class Decision:
 
 class SearchPilot:
     """Turns filtered positions into policy decisions for one mission; see the module docstring.
-    ``bingo_failsafe_s``: see ``BINGO_FAILSAFE_S`` (None: off, the policy alone decides when to go home)."""
+    ``bingo_failsafe_s``: see ``BINGO_FAILSAFE_S`` (None: off, the policy alone decides when to go home).
+
+    ``state``: the search state to fly, one row per drone: by default the mission's single drone; a fleet's
+    (``missions.fleet_search.FleetSearchState``) has one row per drone and one shared map, and is flown a round
+    at a time (:meth:`decide_round`)."""
 
     def __init__(self, mission: Mission, policy: FlownPolicy, seed: int = 0,
-                 bingo_failsafe_s: float | None = BINGO_FAILSAFE_S):
+                 bingo_failsafe_s: float | None = BINGO_FAILSAFE_S, state: BeliefSearchState | None = None):
         self.mission, self.policy = mission, policy
         self.bingo_failsafe_s = bingo_failsafe_s
         self.flight = mission.flight
         self.subgoal_interval = policy.subgoal_interval or self.flight.subgoal_interval
         # how the artifact's movement is read: north / east, or towards / right of the observation's target
         self.action_frame = policy.action_frame
-        # padded to the training environment's slots: the detection draws are keyed by slot
-        scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence],
-                                            num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))
-        self.state = BeliefSearchState(scen, self.flight)
-        self.state.reset(np.array([0]), np.array([seed], dtype=np.uint64))
-        policy.attach(self.state)
-        self.intensity = np.zeros(1)
-        self.zoom = np.zeros(1)
-        self.goal_segments = 0
-        self.goals_reached = 0
-        self._segment_reached = False
+        if state is None:
+            # padded to the training environment's slots: the detection draws are keyed by slot
+            scen = ScenarioBatch.from_scenarios([mission.scenario], [mission.geofence],
+                                                num_targets=max(TARGET_SLOTS, len(mission.scenario.targets)))
+            state = BeliefSearchState(scen, self.flight)
+            state.reset(np.array([0]), np.array([seed], dtype=np.uint64))
+        self.state = state
+        policy.attach(state)
+        n = state.n
+        self.intensity = np.zeros(n)
+        self.zoom = np.zeros(n)
+        self.live = np.ones(n, dtype=bool)
+        """Rows (drones) still searching: a row whose search ended takes no more decisions and looks no more."""
+        self.goal_segments = np.zeros(n, dtype=np.int64)
+        self.goals_reached = np.zeros(n, dtype=np.int64)
+        self._segment_reached = np.zeros(n, dtype=bool)
         self._started = False
 
     @property
@@ -141,94 +150,143 @@ class SearchPilot:
 
     def decide(self, position_ne: np.ndarray) -> Decision:
         """One decision at the drone's position (2,); the first call starts the search there."""
-        state = self.state
-        position = np.asarray(position_ne, dtype=np.float64).reshape(1, 2)
-        end = None
-        if not self._started:  # the search starts where the drone is: no step flown yet
+        decision = self.decide_round(np.asarray(position_ne, dtype=np.float64).reshape(1, 2), np.ones(1, dtype=bool))
+        return decision[0]
+
+    def decide_round(self, positions_ne: np.ndarray, searching: np.ndarray) -> list[Decision | None]:
+        """One decision step of every row at its drone's position (N, 2); the first call starts the search there.
+        ``searching`` (N,): the drones that search this step; the others (blind, or not searching yet) move on in
+        time with their camera off and get None, as do rows whose search has ended."""
+        state, n = self.state, self.state.n
+        position = np.asarray(positions_ne, dtype=np.float64).reshape(n, 2)
+        acting = self.live & np.asarray(searching, dtype=bool)
+        ends: list[str | None] = [None] * n
+        if not self._started:  # the search starts where the drones are: no step flown yet
             self._started = True
             state.position[:] = position
         else:
-            out = state.advance(position, self.intensity, self.zoom, self.flight.step_period_s)
-            self._segment_reached |= bool(out.goal_reached[0])
-            end = self._end_reason(out)
-            if end is None and self._past_bingo():
-                end = "bingo failsafe"
-        new_goal = False
-        if end is None and self.policy.hierarchical and state.goal_due(self.subgoal_interval)[0]:
-            self._close_segment()
-            goal = int(self.policy.select_goal(observe_search(state, True)[0, :LAYOUT_V4.meta_dim]))
-            state.set_goals(np.array([goal]))
-            new_goal = True
-            if goal == RETURN_TO_BASE and state.left_home[0]:
-                # Home, once the drone has been away (as the environment's "returned"): the runner's RTL flies it.
-                # Chosen before it has left, ReturnToBase holds over home until the next decision, as in training.
-                end = "return to base"
+            out = state.advance(position, np.where(acting, self.intensity, 0.0), self.zoom, self.flight.step_period_s)
+            self._segment_reached |= out.goal_reached
+            ends = self._end_reasons(out)
+        ends = [end if self.live[i] else None for i, end in enumerate(ends)]
+        if n > 1 and "victim reached" in ends:  # the find ends the search for the whole fleet
+            ends = [end or ("victim reached by another drone" if self.live[i] else None) for i, end in enumerate(ends)]
+        deciding = acting & np.array([end is None for end in ends])
+        state.searching[:] = deciding  # what the fleet's planner splits the water among
+        new_goal = np.zeros(n, dtype=bool)
+        if self.policy.hierarchical:
+            due = deciding & state.goal_due(self.subgoal_interval)
+            if due.any():
+                rows = np.flatnonzero(due)
+                self._close_segments(due)
+                meta = observe_search(state, True)[rows, :LAYOUT_V4.meta_dim]
+                goals = np.full(n, NO_GOAL)
+                goals[rows] = self.policy.select_goal(meta[0]) if n == 1 else self.policy.select_goal(meta)
+                state.set_goals(goals, mask=due)
+                new_goal = due
+                for row in rows:
+                    if goals[row] == RETURN_TO_BASE and state.left_home[row]:
+                        # Home, once the drone has been away (as the environment's "returned"): the runner's RTL
+                        # flies it. Chosen before it has left, ReturnToBase holds over home until the next decision.
+                        ends[row] = "return to base"
         obs = observe_search(state, self.policy.hierarchical)
-        action = self.policy.act(obs[0]).astype(np.float64)
-        if end is not None:
-            self._close_segment()
-        finite = bool(np.all(np.isfinite(action)))
-        if finite:
-            self.intensity[0], self.zoom[0] = np.clip(action[2:4], 0.0, 1.0)
-        movement = np.clip(action[:2], -1.0, 1.0) if finite else np.array([np.nan] * 2)
-        if finite:  # as the training environment read it (its action_frame)
-            target_ne = state.target_position(self.policy.hierarchical)
-            movement = movement_velocity(movement[None], state.position, target_ne, self.action_frame,
-                                         self.flight.max_speed_mps, self.flight.step_period_s)[0]
-        else:
-            movement = movement * self.flight.max_speed_mps
-        if finite:  # the environment's safety filter: danger zones and geofence (missions.shield)
-            scen = state.scen
-            movement = shield_velocity(state.position, movement[None], scen.obstacles, scen.obstacle_valid,
-                                       scen.fence)[0]
-        target = float(state.altitude_target[0])
-        return Decision(self.step, (float(movement[0]), float(movement[1])), float(self.intensity[0]),
-                        float(self.zoom[0]), int(state.goal[0]), tuple(state.goal_point[0].tolist()), new_goal,
-                        end, tuple(float(a) for a in action),
-                        None if target == self.flight.altitude_m else target)
+        action = (self.policy.act(obs[0])[None] if n == 1 else self.policy.act(obs)).astype(np.float64)
+        ended = np.array([end is not None for end in ends])
+        self._close_segments(ended)
+        finite = np.all(np.isfinite(action), axis=1)
+        update = finite & acting
+        self.intensity[update] = np.clip(action[update, 2], 0.0, 1.0)
+        self.zoom[update] = np.clip(action[update, 3], 0.0, 1.0)
+        # as the training environment read it (its action_frame), then its safety filter: danger zones, geofence
+        movement = np.where(finite[:, None], np.clip(np.nan_to_num(action[:, :2]), -1.0, 1.0), 0.0)
+        target_ne = state.target_position(self.policy.hierarchical)
+        movement = movement_velocity(movement, state.position, target_ne, self.action_frame,
+                                     self.flight.max_speed_mps, self.flight.step_period_s)
+        scen = state.scen
+        movement = shield_velocity(state.position, movement, scen.obstacles, scen.obstacle_valid, scen.fence)
+        movement[~finite] = np.nan
+        decisions: list[Decision | None] = [None] * n
+        for row in np.flatnonzero(acting):
+            target = float(state.altitude_target[row])
+            decisions[row] = Decision(
+                int(state.steps[row]), (float(movement[row, 0]), float(movement[row, 1])),
+                float(self.intensity[row]), float(self.zoom[row]), int(state.goal[row]),
+                tuple(state.goal_point[row].tolist()), bool(new_goal[row]), ends[row],
+                tuple(float(a) for a in action[row]),
+                None if target == float(state.search_altitude_m[row]) else target)
+        self.live &= ~ended
+        return decisions
 
-    def _past_bingo(self) -> bool:
+    def _end_reasons(self, out) -> list[str | None]:
         state = self.state
         # Wherever the drone is, home included: a policy that never leaves home must not hover there until the
         # sortie's endurance is gone either.
-        return self.bingo_failsafe_s is not None and float(state.bingo_margin_s[0]) <= self.bingo_failsafe_s
+        past_bingo = (np.zeros(state.n, dtype=bool) if self.bingo_failsafe_s is None
+                      else state.bingo_margin_s <= self.bingo_failsafe_s)
+        reasons: list[str | None] = []
+        for row in range(state.n):
+            reason = None
+            for ended, why in ((out.success, "victim reached"), (out.collision, "entered a danger zone"),
+                               (out.out_of_bounds, "left the geofence"), (out.returned, "returned home"),
+                               (out.ran_dry, "endurance exhausted")):
+                if ended[row]:
+                    reason = why
+                    break
+            if reason is None and int(state.steps[row]) >= self.flight.max_steps:
+                reason = "step limit"
+            if reason is None and past_bingo[row]:
+                reason = "bingo failsafe"
+            reasons.append(reason)
+        return reasons
 
-    def _end_reason(self, out) -> str | None:
-        for ended, reason in ((out.success, "victim reached"), (out.collision, "entered a danger zone"),
-                              (out.out_of_bounds, "left the geofence"), (out.returned, "returned home"),
-                              (out.ran_dry, "endurance exhausted")):
-            if ended[0]:
-                return reason
-        if self.step >= self.flight.max_steps:
-            return "step limit"
-        return None
+    def _close_segments(self, rows: np.ndarray) -> None:
+        closing = rows & (self.state.goal != NO_GOAL)
+        self.goal_segments += closing
+        self.goals_reached += closing & self._segment_reached
+        self._segment_reached[rows] = False
 
-    def _close_segment(self) -> None:
-        if self.state.goal[0] != NO_GOAL:
-            self.goal_segments += 1
-            self.goals_reached += self._segment_reached
-        self._segment_reached = False
-
-    def summary(self) -> dict:
-        """The search part of the mission report."""
+    def summary(self, row: int = 0) -> dict:
+        """The search part of the mission report (of drone ``row`` of a fleet)."""
         state = self.state
-        first = int(state.first_detection_step[0])
+        first = int(state.first_detection_step[row])
+        segments = int(self.goal_segments[row])
         return {
-            "steps": self.step,
-            "victim_detected": bool(state.has_detection[0]),
-            "victim_confirmed": bool(state.status[0, state.scen.primary_index[0]] == CONFIRMED),
-            "candidates_rejected": int((state.status[0] == REJECTED).sum()),
-            "energy_left": float(state.energy_left[0]),
+            "steps": int(state.steps[row]),
+            "victim_detected": bool(state.has_detection[row]),
+            "victim_confirmed": bool(state.status[row, state.scen.primary_index[row]] == CONFIRMED),
+            "candidates_rejected": int((state.status[row] == REJECTED).sum()),
+            "energy_left": float(state.energy_left[row]),
             "first_detection_step": first if first >= 0 else None,
             "time_to_detection_s": first * self.flight.step_period_s if first >= 0 else None,
-            "coverage_ratio": float(state.coverage_ratio[0]),
-            "subgoal_reachability": (self.goals_reached / self.goal_segments) if self.goal_segments else None,
+            "coverage_ratio": float(state.coverage_ratio[row]),
+            "subgoal_reachability": (int(self.goals_reached[row]) / segments) if segments else None,
             "goal_names": list(GOAL_NAMES),
         }
 
 
+class DecisionSource(Protocol):
+    """Where the runner's SEARCH state gets its decisions (``autonomy.search_loop``): its own pilot
+    (:class:`DecisionWorker`) or its seat in a fleet's decision rounds (``autonomy.fleet_runner.FleetSeat``)."""
+
+    def begin(self, now_s: float, period_s: float) -> None:
+        """The runner is ready to search, one decision every ``period_s`` from now."""
+
+    def started(self) -> bool:
+        """Whether decisions may start (a fleet waits for all its drones to be ready)."""
+
+    def due(self, now_s: float) -> bool:
+        """Whether the runner should hand in its position for a decision now."""
+
+    def submit(self, position_ne: np.ndarray, now_s: float) -> None:
+        """The filtered position (2,) for the decision that is due."""
+
+    def poll(self, now_s: float) -> Decision | None:
+        """The finished decision, once (None while computing or idle)."""
+
+
 class DecisionWorker:
-    """Runs ``pilot.decide`` off the control loop; ``threaded`` in real time, simulated latency in lockstep."""
+    """Runs ``pilot.decide`` off the control loop (a :class:`DecisionSource`): ``threaded`` in real time,
+    simulated latency in lockstep."""
 
     def __init__(self, pilot: SearchPilot, threaded: bool, simulated_compute_s: float = 0.0):
         self.pilot, self.threaded = pilot, threaded
@@ -236,12 +294,28 @@ class DecisionWorker:
         self._pending: tuple[float, Decision] | None = None
         self._thread: threading.Thread | None = None
         self._result: Decision | None = None
+        self._next_s = 0.0
+        self._period_s = 1.0
 
     @property
     def busy(self) -> bool:
         return self._pending is not None or (self._thread is not None and self._thread.is_alive())
 
+    def begin(self, now_s: float, period_s: float) -> None:
+        self._next_s, self._period_s = now_s, period_s
+
+    def started(self) -> bool:
+        return True
+
+    def due(self, now_s: float) -> bool:
+        return now_s + 1e-9 >= self._next_s and not self.busy
+
     def submit(self, position_ne: np.ndarray, now_s: float) -> None:
+        # One period after the scheduled decision; a decision that came late (slow policy) skips the missed periods
+        # instead of a burst of back-to-back decisions, each counted as a full step.
+        self._next_s += self._period_s
+        if self._next_s <= now_s:
+            self._next_s = now_s + self._period_s
         if self.threaded:
             def work() -> None:
                 self._result = self.pilot.decide(position_ne)

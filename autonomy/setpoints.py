@@ -90,6 +90,12 @@ class SetpointStreamer:
         self.latest_at_s = now_s
         return self.latest
 
+    def amend(self, command: VelocityCommand) -> VelocityCommand:
+        """Change what is streamed without counting it as a fresh decision (the stale timer runs on): a fleet's
+        separation shield correcting the latest decision between two decisions."""
+        self.latest = self.clamp(command)
+        return self.latest
+
     def clamp(self, command: VelocityCommand) -> VelocityCommand:
         """Horizontal speed scaled down to its limit (direction kept), vertical clipped; NaN/inf -> hold."""
         values = (command.vn, command.ve, command.vd)

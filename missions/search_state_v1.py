@@ -107,6 +107,10 @@ class BeliefSearchState:
         g = belief_logic.map_cells(scen.area) if map_cells is None else map_cells
         self.position, self.targets = np.zeros((n, 2)), np.zeros((n, t, 2))
         self.altitude, self.altitude_target, self.speed_mps = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.search_altitude_m = np.full(n, float(flight.altitude_m))
+        """(N,) each search's altitude above home (m): the flight's, or a fleet drone's own layer."""
+        self.searching = np.ones(n, dtype=bool)
+        """(N,) whose drone searches now: a fleet's planner (``missions.searchers.fleet``) leaves the others out."""
         self.time_s, self.steps = np.zeros(n), np.zeros(n, dtype=np.int64)
         self.episode_seed = np.zeros(n, dtype=np.uint64)
         self.belief, self.coverage = np.zeros((n, g, g)), np.zeros((n, g, g))
@@ -138,7 +142,7 @@ class BeliefSearchState:
         scen = self.scen
         self.targets[indices] = scen.targets[indices]
         self.position[indices] = scen.start[indices]
-        self.altitude[indices] = self.altitude_target[indices] = self.flight.altitude_m
+        self.altitude[indices] = self.altitude_target[indices] = self.search_altitude_m[indices]
         self.speed_mps[indices] = self.time_s[indices] = self.blurred_s[indices] = 0.0
         self.steps[indices] = 0
         self.episode_seed[indices] = episode_seeds
@@ -248,9 +252,8 @@ class BeliefSearchState:
         first = victim_seen & ~self.has_detection
         self.first_detection_step[first] = self.steps[first]
         self.has_detection |= victim_seen
-        removed = belief_logic.look(self.belief, self.coverage, scen.area, self.belief_offset, position, self.altitude,
-                                    zoom, intensity, search.OBJECT_SIZE_M[reported],
-                                    scen.detection_factor[rows, scen.primary_index])
+        removed = self._look(position, zoom, intensity, search.OBJECT_SIZE_M[reported],
+                             scen.detection_factor[rows, scen.primary_index])
 
         distance = search.distance_to_primary(position, self.targets, scen.primary_index)
         success = (self.status[rows, scen.primary_index] == CONFIRMED) & (distance <= flight.reach_radius_m)
@@ -269,12 +272,19 @@ class BeliefSearchState:
         if reached.any():
             self.goal_point[reached] = self._points(self.goal[reached], reached)
         moved_on = reached & (np.hypot(*(self.goal_point - step_goal_point).T) > flight.reach_radius_m)
-        self.altitude_target[:] = np.where(self.close_look(), min(flight.altitude_m, CLOSE_LOOK_ALTITUDE_M),
-                                           flight.altitude_m)
+        self.altitude_target[:] = np.where(self.close_look(), np.minimum(self.search_altitude_m, CLOSE_LOOK_ALTITUDE_M),
+                                           self.search_altitude_m)
         bingo = (margin_before > BINGO_RESERVE_S) & (self.bingo_margin_s <= BINGO_RESERVE_S)
         self.decision_event |= self._new_candidate | bingo
         return BeliefStepOutcome(success, collision, out_of_bounds, ran_dry, returned, distance, reached, moved_on,
                                  step_goal_point, removed, self._identify_chance)
+
+    def _look(self, position: np.ndarray, zoom: np.ndarray, intensity: np.ndarray, size_m: np.ndarray,
+              factor: np.ndarray) -> np.ndarray:
+        """Each search's look lowers its own map (``missions.belief.look``); a fleet's searches share one
+        (``missions.fleet_search``). Returns the belief each look removed (N,)."""
+        return belief_logic.look(self.belief, self.coverage, self.scen.area, self.belief_offset, position,
+                                 self.altitude, zoom, intensity, size_m, factor)
 
     def _update_candidates(self, sighted: np.ndarray, intensity: np.ndarray, zoom: np.ndarray, dt_s: float) -> None:
         """Sightings of the reported category (N, T) become or update candidates; close looks identify them."""

@@ -42,13 +42,20 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
     if isinstance(prepared, int):
         return prepared
     mission, policy, out = prepared
+    if mission.fleet is not None:
+        return _replay_fleet(mission, policy, args, out)
     return _replay(mission, policy, args, out, prog)
 
 
-def _check_replay_arguments(args: argparse.Namespace) -> None:
+def _check_replay_arguments(args: argparse.Namespace, mission) -> None:
     if not 1 <= args.episodes <= 100_000:
         raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
     args.start = mission_replay.DEFAULT_START_TIME if args.start_time is None else parse_start_time(args.start_time)
+    if mission.fleet is not None:
+        for given, flag in ((args.link_faults, "--link-faults"), (args.signing_key, "--signing-key")):
+            if given:
+                raise ValueError(f"{flag}: not available for a fleet replay yet; fly {args.mission} without it, or "
+                                 "one drone's mission (without the fleet section) with it")
     args.faults = None
     if args.link_faults:
         from sitl_bridge.faults import parse_link_faults  # a real flight has the real link's faults
@@ -58,6 +65,35 @@ def _check_replay_arguments(args: argparse.Namespace) -> None:
         args.pool = pool_from_arguments(args)
     except WorkerPoolError as exc:
         raise ValueError(str(exc)) from None
+
+
+def _replay_fleet(mission, policy, args, out: Path) -> int:
+    """A fleet mission: each seed flown by the whole fleet in lockstep (``simulation.fleet_replay``), one after
+    the other."""
+    from autonomy.fleet_runner import fleet_summary
+    from simulation.fleet_replay import replay_fleet
+
+    say = print if args.episodes == 1 and not args.quiet else (lambda text: None)
+    started, simulated, found = time.perf_counter(), 0.0, 0
+    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet and args.episodes > 1)
+    for episode in range(args.episodes):
+        seed = args.seed + episode
+        folder = out if args.episodes == 1 else out / f"seed-{seed:05d}"
+        report = replay_fleet(mission, policy if episode == 0 else args.choice.load(), seed, folder, say=say,
+                              start_time=args.start)
+        simulated += max(d["flight_time_s"] for d in report["vehicles"])
+        found += report["success"]
+        progress.update(1)
+    progress.close()
+    wall = time.perf_counter() - started
+    if args.episodes == 1:
+        print(fleet_summary(report))
+    else:
+        print(f"{mission.name} ({report['pilot']}, {report['drones']} drones): {found}/{args.episodes} searches "
+              "found the victim")
+    print(f"  {simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time; report: "
+          f"{out / 'report.json' if args.episodes == 1 else out}")
+    return 0
 
 
 def parse_start_time(text: str) -> datetime:

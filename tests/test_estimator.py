@@ -186,3 +186,20 @@ def test_real_pymavlink_messages_global_path_agrees_with_local_path():
 def test_bad_config_values_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"EstimatorConfig.{field} must be .*try the default"):
         EstimatorConfig(**{field: value})
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+def test_the_written_out_transition_is_filterpys_to_the_bit(model):
+    """The filter's F and Q, written out for speed, are exactly np.kron's and filterpy's
+    Q_continuous_white_noise's, for any step length."""
+    from filterpy.common import Q_continuous_white_noise
+
+    estimator = PoseEstimator(EstimatorConfig(model=model))
+    order = MODELS[model]
+    for dt in [0.0, 0.004, 0.02, 0.1, 0.7311, 1.0, 2.5]:
+        F, Q = estimator._transition(dt)
+        one_axis = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])[:order, :order]
+        assert F.tobytes() == np.kron(one_axis, np.eye(3)).tobytes()
+        expected = Q_continuous_white_noise(order, dt, estimator.config.process_noise_psd, block_size=3,
+                                            order_by_dim=False)
+        assert Q.tobytes() == expected.tobytes()

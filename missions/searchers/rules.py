@@ -83,6 +83,11 @@ class ScriptedSearch:
                               core.scen.target_size_m[rows, reported], core.scen.detection_factor[rows, reported])
         return width / self.settings.coverage_factor
 
+    def own_candidates(self, worth: np.ndarray) -> np.ndarray:
+        """(N, T) the candidates worth flying to that each slot flies to: all of them (a fleet's planner gives each
+        to one drone, ``missions.searchers.fleet``)."""
+        return worth
+
     def act(self) -> np.ndarray:
         core, settings, flight = self.core, self.settings, self.core.flight
         fresh = (core.steps == 0) | (self.started != core.episode_seed.astype(np.int64))
@@ -91,6 +96,7 @@ class ScriptedSearch:
         point = self.search_point(fresh)
         estimates, kind = core.candidate_estimates(), core.candidate_kind()
         worth = (kind == 2) | ((kind == 1) & (core.plausibility >= settings.investigate_plausibility))
+        worth = self.own_candidates(worth)
         candidate, has_candidate = goal_logic.candidate_point(core.position, estimates, np.where(worth, kind, 0))
         point = np.where(has_candidate[:, None], candidate, point)
         home = core.scen.start

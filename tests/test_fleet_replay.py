@@ -1,0 +1,148 @@
+"""Fleet replays (``hrlsac mission replay FLEET.yaml``, ``simulation.fleet_replay``): several simulated vehicles, one
+runner each on one lockstep clock, one shared search. The shipped fleet demo finds and confirms the victim with
+three drones that all land at home without a separation breach; replays are byte-identical; the per-drone policy
+artifact flies a fleet too; a drone that leaves early leaves its water to the others; bad input gets one line."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from pymavlink import mavutil
+
+from cli_harness import assert_clean_error, run_cli
+from missions.mission_file import load_mission
+from simulation.fleet_replay import replay_fleet
+from autonomy.pilots import ScriptedPilot
+
+SMALL_FLEET = """\
+name: small-fleet
+flight: {altitude_m: 30, max_speed_mps: 10, step_period_s: 1.0, subgoal_interval: 30, max_steps: 400,
+         reach_radius_m: 15}
+geofence: {north_min_m: -150, north_max_m: 650, east_min_m: -450, east_max_m: 450}
+scenario:
+  home: {lat_deg: 47.397742, lon_deg: 8.545594, alt_m: 488}
+  area: {north_min_m: -100, north_max_m: 600, east_min_m: -400, east_max_m: 400}
+  start: {north_m: 0, east_m: 0}
+  datum: {north_m: 330, east_m: -60, sigma_m: 90}
+  targets:
+    - {category: person, north_m: 380, east_m: -110, primary: true}
+    - {category: person, north_m: 300, east_m: 40}
+  conditions: {sea: calm, weather: clear, time_of_day: day, visibility: 1.0, wind: 0.1, wind_direction_deg: 60}
+  current: {north_mps: 0.05, east_mps: 0.0, forecast_north_mps: 0.05, forecast_east_mps: 0.0}
+  endurance_s: 600
+  seed: 4
+fleet:
+  count: 2
+  launch_line: {bearing_deg: 90, spacing_m: 40}
+  separation_m: 30
+  altitude_layer_m: 10
+"""
+
+
+@pytest.fixture(scope="module")
+def small_fleet(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("fleet") / "small-fleet.yaml"
+    path.write_text(SMALL_FLEET)
+    return path
+
+
+@pytest.fixture(scope="module")
+def demo_replay(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fleet-demo")
+    result = run_cli("mission", "replay", "missions/library/fleet-demo.yaml", "--pilot", "greedy_bayes",
+                     "--out", str(out), "--quiet")
+    return result, out, json.loads((out / "report.json").read_text())
+
+
+def test_the_fleet_demo_finds_confirms_and_every_drone_lands_at_home_apart(demo_replay):
+    result, out, report = demo_replay
+    assert result.code == 0, result.err
+    assert "fleet-demo (greedy_bayes, 3 drones): found by drone" in result.out
+    assert report["success"] and report["complete"] and report["drones"] == 3
+    finder = next(d for d in report["vehicles"] if d["name"] == report["found_by"])
+    assert finder["search_end"] == "victim reached" and finder["victim_confirmed"]
+    assert report["found_at_s"] > 0
+    assert [d["system_id"] for d in report["vehicles"]] == [1, 2, 3]
+    for drone in report["vehicles"]:
+        if drone is not finder:
+            assert drone["search_end"] == "victim reached by another drone"
+        assert drone["transitions"][-1]["reason"] == "landed and disarmed"
+        # "completed": landed and disarmed within 10 m of its own home (else the watch says "ditched")
+        assert drone["outcome"]["outcome"] == "completed", drone["outcome"]
+    assert report["all_landed"] and report["all_completed"]
+    separation = report["separation"]
+    assert not separation["breached"] and separation["breaches"] == []
+    assert separation["closest_unlayered_m"] >= separation["horizontal_m"]
+    # the drones flew their own layers: 50, 60 and 70 m above home at the start of the search
+    layers = [d["transitions"][[t["to"] for t in d["transitions"]].index("OFFBOARD")]["reason"]
+              for d in report["vehicles"]]
+    assert [float(text.split()[1]) for text in layers] == pytest.approx([50, 60, 70], abs=1.5)
+
+
+def test_each_drone_has_its_own_tlog_of_its_own_system(demo_replay):
+    _, out, _ = demo_replay
+    for system_id, name in enumerate(("drone1", "drone2", "drone3"), start=1):
+        log = mavutil.mavlink_connection(str(out / name / "flight.tlog"), dialect="common")
+        sources = set()
+        while (msg := log.recv_match(type=["HEARTBEAT", "SET_POSITION_TARGET_LOCAL_NED"])) is not None:
+            sources.add(msg.get_srcSystem())
+            if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                assert msg.target_system == system_id
+        assert sources == {system_id}  # the vehicle, and its companion sharing its system id
+
+
+def test_two_fleet_replays_of_a_seed_write_identical_tlogs(small_fleet, tmp_path):
+    mission = load_mission(small_fleet)
+    reports = [replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3, out=tmp_path / run) for run in "ab"]
+    assert reports[0] == reports[1]
+    for name in ("drone1", "drone2"):
+        tlogs = [(tmp_path / run / name / "flight.tlog").read_bytes() for run in "ab"]
+        assert tlogs[0] == tlogs[1] and len(tlogs[0]) > 100_000
+    assert reports[0]["success"] and reports[0]["all_completed"]
+
+
+def test_the_shipped_policy_flies_each_drone_of_a_fleet(small_fleet, tmp_path):
+    result = run_cli("mission", "replay", str(small_fleet), "--policy", "policies/pretrained/hrl-sac.pt",
+                     "--accept-flight-mismatch", "--out", str(tmp_path), "--quiet", "--seed", "1")
+    assert result.code == 0, result.err
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["pilot"] == "hrl-sac" and report["drones"] == 2
+    assert report["all_landed"] and not report["separation"]["breached"]
+    assert all(d["outcome"]["outcome"] in ("completed", "safe") for d in report["vehicles"])
+
+
+def test_a_drone_that_goes_home_early_leaves_its_water_to_the_other(small_fleet):
+    """Drone 2's battery is nearly flat: the runner's low-battery failsafe sends it home early; drone 1 searches
+    on alone and finds the victim."""
+    mission = load_mission(small_fleet)
+    report = replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3,
+                          battery_percent={"drone2": 26.0})
+    first, second = report["vehicles"]
+    assert "battery" in second["search_end"]
+    assert second["transitions"][-1]["reason"] == "landed and disarmed"
+    assert report["success"] and report["found_by"] == "drone1"
+    left = next(t["time_s"] for t in second["transitions"] if t["to"] == "RTL")
+    assert left < report["found_at_s"]  # it went home first, and drone 1 searched on alone
+
+
+@pytest.mark.parametrize("flags, mentions", [
+    (["--link-faults", "loss=0.1"], ("--link-faults", "fleet")),
+])
+def test_fleet_replay_options_it_cannot_take_are_one_line_errors(small_fleet, tmp_path, flags, mentions):
+    out = tmp_path / "never"
+    assert_clean_error(run_cli("mission", "replay", str(small_fleet), "--pilot", "greedy_bayes", "--out", str(out),
+                               *flags), *mentions)
+    assert not out.exists()
+
+
+def test_a_fleet_run_needs_one_connection_per_drone(small_fleet, tmp_path):
+    out = tmp_path / "never"
+    result = run_cli("mission", "run", str(small_fleet), "--pilot", "greedy_bayes", "--out", str(out),
+                     "--connect", "udpin:127.0.0.1:14540")
+    assert_clean_error(result, "--connect given 1 times", "2 drones")
+    assert not out.exists()
+    single = run_cli("mission", "run", "missions/library/demo.yaml", "--pilot", "greedy_bayes", "--out", str(out),
+                     "--connect", "udpin:127.0.0.1:14540", "--connect", "udpin:127.0.0.1:14541")
+    assert_clean_error(single, "--connect given 2 times", "1 drone")
+    assert not out.exists()
