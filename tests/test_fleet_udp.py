@@ -1,0 +1,58 @@
+"""A fleet flown over real UDP in real time: ``hrlsac sitl --count 2`` (two PX4 instances in one process, system ids
+1 and 2, offboard ports one apart) and ``hrlsac mission run FLEET.yaml --connect ... --connect ...`` as separate
+processes. Both drones search on their layers, return and land at home; each drone's tlog holds its own system's
+setpoints only."""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+from conftest import free_udp_ports
+from pymavlink import mavutil
+
+from test_fleet_replay import SMALL_FLEET
+
+HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
+UDP_FLEET = (SMALL_FLEET.replace("name: small-fleet", "name: udp-fleet").replace("altitude_m: 30", "altitude_m: 10")
+             .replace("max_steps: 400", "max_steps: 10").replace("altitude_layer_m: 10", "altitude_layer_m: 5"))
+
+
+def test_a_fleet_flies_over_real_udp_against_hrlsac_sitl_count_2(tmp_path):
+    path = tmp_path / "udp-fleet.yaml"
+    path.write_text(UDP_FLEET)
+    api_port, api_remote = free_udp_ports(2)
+    api_port, api_remote = api_port + 100, api_remote + 200  # vehicle 2 takes the port above each (PX4's numbering)
+    sitl = subprocess.Popen([*HRLSAC, "sitl", "--count", "2", "--offset-line", "90,40", "--api-port", str(api_port),
+                             "--api-remote", str(api_remote), "--gcs-remote", "0", "--param", "RTL_RETURN_ALT=12",
+                             "--param", "MPC_TKO_SPEED=3", "--param", "MPC_LAND_SPEED=2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(3.0)
+        assert sitl.poll() is None, sitl.communicate()
+        result = subprocess.run([*HRLSAC, "mission", "run", str(path), "--pilot", "greedy_bayes",
+                                 "--connect", f"udpin:127.0.0.1:{api_remote}",
+                                 "--connect", f"udpin:127.0.0.1:{api_remote + 1}", "--out", str(tmp_path / "out")],
+                                capture_output=True, text=True, timeout=240)
+    finally:
+        sitl.send_signal(signal.SIGINT)
+        vehicle_log, _ = sitl.communicate(timeout=10)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "udp-fleet (greedy_bayes, 2 drones): victim not found; 2 of 2 landed and disarmed; separation kept" \
+        in result.stdout
+    assert "vehicle 2 of 2: Simulated PX4 multirotor (sysid 2)" in vehicle_log
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["complete"] and report["clock"] == "wall" and report["all_landed"]
+    assert not report["separation"]["breached"]
+    for system_id, drone in enumerate(report["vehicles"], start=1):
+        assert drone["system_id"] == system_id
+        assert drone["search_end"] == "step limit"
+        to_search = next(t for t in drone["transitions"] if t["to"] == "OFFBOARD")
+        assert float(to_search["reason"].split()[1]) >= [9.0, 14.0][system_id - 1]  # its own layer: 10 or 15 m
+        log = mavutil.mavlink_connection(str(tmp_path / "out" / drone["name"] / "flight.tlog"), dialect="common")
+        targets = set()
+        while (msg := log.recv_match(type="SET_POSITION_TARGET_LOCAL_NED")) is not None:
+            targets.add(msg.target_system)
+        assert targets == {system_id}
