@@ -56,6 +56,9 @@ class FleetDecisions:
         self.rounds = 0
         self.found_at_s: float | None = None
         """When a round brought the find (a drone confirmed the victim and reached it)."""
+        self.started_at_s: float | None = None
+        """When the drones started searching together."""
+        """When a round brought the find (a drone confirmed the victim and reached it)."""
         self._positions = np.zeros((n, 2))
         self._submitted = np.zeros(n, dtype=bool)
         self._thread: threading.Thread | None = None
@@ -69,6 +72,7 @@ class FleetDecisions:
         if not self.has_started:
             if self.ready.any() and np.all(self.ready | self.out):
                 self.has_started, self.next_round_s = True, now_s
+                self.started_at_s = now_s
             return
         if self._thread is not None:
             if self._thread.is_alive():
@@ -216,12 +220,17 @@ class FleetRunner:
             "success": finder is not None,
             "found_by": finder,
             "search_rounds": self.decisions.rounds,
-            "found_at_s": None if self.decisions.found_at_s is None else round(self.decisions.found_at_s, 3),
+            "found_at_s": _rounded(self.decisions.found_at_s),
+            "search_started_s": _rounded(self.decisions.started_at_s),
             "coverage_ratio": float(state.coverage_ratio[0]),
             "all_landed": all(d["transitions"][-1]["reason"] == "landed and disarmed" for d in drones),
             "separation": self.watch.summary(),
             "vehicles": drones,
         }
+
+
+def _rounded(time_s: float | None) -> float | None:
+    return None if time_s is None else round(time_s, 3)
 
 
 def drone_missions(mission: Mission) -> list[Mission]:

@@ -13,12 +13,13 @@ name) holding its ``flight.tlog``.
 from __future__ import annotations
 
 import dataclasses
-
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
 from autonomy.fleet_runner import build_fleet, drone_missions
+from autonomy.pilots import PilotChoice
 from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
 from autonomy.runner import RunnerConfig
 from autonomy.search_pilot import FlownPolicy
@@ -28,6 +29,8 @@ from missions.geodesy import GeoPoint, LocalFrame
 from missions.mission import Mission
 from simulation.flight_outcome import FlightWatch, FlyawayLimits
 from simulation.mission_replay import DEFAULT_START_TIME, airframe_for, unix_microseconds
+from simulation.parallel_replay import speak_mavlink2
+from sitl_bridge.faults import LinkFaults, apply_faults
 from sitl_bridge.link import MemoryMavConnection, memory_link_pair
 from sitl_bridge.vehicle import SimulatedVehicle, VehicleConfig
 
@@ -50,11 +53,14 @@ class FleetClock:
 def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path | None = None,
                  config: RunnerConfig = RunnerConfig(), say: Callable[[str], None] = lambda text: None,
                  limits: FlyawayLimits = FlyawayLimits(), start_time: datetime = DEFAULT_START_TIME,
-                 battery_percent: dict[str, float] | None = None) -> dict:
+                 battery_percent: dict[str, float] | None = None,
+                 link_faults: dict[str, LinkFaults] | None = None) -> dict:
     """Fly the fleet ``mission`` once with ``policy`` (a scripted searcher flies the fleet's rows together; an
     artifact flies each drone); ``seed`` drives the vehicles' sensor noise and the cameras' draws. With ``out``,
     writes the report and each drone's tlog there. Returns the fleet's report. ``battery_percent``: drones (by
-    name) that take off with a part-charged battery (a drone that has to leave early)."""
+    name) that take off with a part-charged battery (a drone that has to leave early). ``link_faults``: faults on
+    drones' links (by name), timed on the simulated clock, seeded by ``seed`` plus the drone's place unless they
+    carry their own seed."""
     if mission.fleet is None:
         raise ValueError(f"{mission.name or 'the mission'} has no fleet section: fly it with replay_mission")
     fleet = mission.fleet
@@ -67,9 +73,11 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
     for i, (vehicle_spec, own) in enumerate(zip(fleet.vehicles, missions)):
         lat, lon, alt = frame.to_geodetic(vehicle_spec.north_m, vehicle_spec.east_m, 0.0)
         vehicle_end, client_end = memory_link_pair(f"fleet-{vehicle_spec.name}")
+        faults = (link_faults or {}).get(vehicle_spec.name)
+        vehicle_links = apply_faults([vehicle_end], faults, lambda: vehicles[0].time_s, seed + i)
         vehicle = SimulatedVehicle(VehicleConfig(home=GeoPoint(lat, lon, alt), seed=seed + i,
                                                  system_id=vehicle_spec.system_id, airframe=airframe_for(own)),
-                                   [vehicle_end], on_event=lambda event, k=i: watches[k].on_vehicle_event(event))
+                                   vehicle_links, on_event=lambda event, k=i: watches[k].on_vehicle_event(event))
         if battery_percent and vehicle_spec.name in battery_percent:
             charge = vehicle.config.airframe.battery_capacity_wh * battery_percent[vehicle_spec.name] / 100.0
             vehicle.state = dataclasses.replace(vehicle.state, battery_wh=charge)
@@ -110,7 +118,8 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
     finally:
         for tlog in tlogs:
             tlog.close()
-    report.update(policy.describe(), seed=seed, clock="lockstep")
+    report.update(policy.describe(), seed=seed, clock="lockstep",
+                  link_faults={name: faults.describe() for name, faults in (link_faults or {}).items()})
     for drone, watch in zip(report["vehicles"], watches):
         watch.settle()
         drone["outcome"] = watch.outcome(drone)
@@ -118,3 +127,29 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
     partial.finish(report)
     return report
 
+
+
+@dataclass(frozen=True)
+class FleetEpisode:
+    """One fleet replay for one worker (``simulation.worker_pool.run_tasks``): the mission, what flies, the seed."""
+
+    mission: Mission
+    pilot: PilotChoice
+    seed: int
+    battery_percent: dict[str, float] | None = None
+    """As :func:`replay_fleet`'s."""
+    link_faults: dict[str, LinkFaults] | None = None
+    """As :func:`replay_fleet`'s."""
+
+
+def fly_fleet_episode(episode: FleetEpisode) -> dict:
+    """Fly one fleet episode without writing files; its report without the drones' event logs (a worker's answer
+    stays small): each drone keeps its name, search end, outcome, whether it landed and disarmed, and the search
+    endurance it had left."""
+    speak_mavlink2()
+    report = replay_fleet(episode.mission, episode.pilot.load(), seed=episode.seed,
+                          battery_percent=episode.battery_percent, link_faults=episode.link_faults)
+    report["vehicles"] = [{"name": d["name"], "search_end": d["search_end"], "outcome": d["outcome"]["outcome"],
+                           "landed": d["transitions"][-1]["reason"] == "landed and disarmed",
+                           "energy_left": d["energy_left"]} for d in report["vehicles"]]
+    return report

@@ -51,11 +51,9 @@ def _check_replay_arguments(args: argparse.Namespace, mission) -> None:
     if not 1 <= args.episodes <= 100_000:
         raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
     args.start = mission_replay.DEFAULT_START_TIME if args.start_time is None else parse_start_time(args.start_time)
-    if mission.fleet is not None:
-        for given, flag in ((args.link_faults, "--link-faults"), (args.signing_key, "--signing-key")):
-            if given:
-                raise ValueError(f"{flag}: not available for a fleet replay yet; fly {args.mission} without it, or "
-                                 "one drone's mission (without the fleet section) with it")
+    if mission.fleet is not None and args.signing_key:
+        raise ValueError(f"--signing-key: not available for a fleet replay yet; fly {args.mission} without it, or "
+                         "one drone's mission (without the fleet section) with it")
     args.faults = None
     if args.link_faults:
         from sitl_bridge.faults import parse_link_faults  # a real flight has the real link's faults
@@ -79,8 +77,9 @@ def _replay_fleet(mission, policy, args, out: Path) -> int:
     for episode in range(args.episodes):
         seed = args.seed + episode
         folder = out if args.episodes == 1 else out / f"seed-{seed:05d}"
+        faults = {vehicle.name: args.faults for vehicle in mission.fleet.vehicles} if args.faults else None
         report = replay_fleet(mission, policy if episode == 0 else args.choice.load(), seed, folder, say=say,
-                              start_time=args.start)
+                              start_time=args.start, link_faults=faults)
         simulated += max(d["flight_time_s"] for d in report["vehicles"])
         found += report["success"]
         progress.update(1)

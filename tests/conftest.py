@@ -19,7 +19,8 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 import pytest  # noqa: E402
 
 LONGEST_FIRST = ("test_runner_udp.py", "test_learning_sac.py", "test_mavproxy_flight.py", "test_learning.py",
-                 "test_onboard_install.py", "test_scaling.py", "test_mavsdk_mission.py", "test_runner_replay.py",
+                 "test_fleet_udp.py", "test_onboard_install.py", "test_scaling.py", "test_fleet_replay.py",
+                 "test_mavsdk_mission.py", "test_runner_replay.py",
                  "test_mavsdk_offboard.py", "test_training_evaluation.py", "test_link_faults_outages.py",
                  "test_mavsdk_actions.py", "test_compare.py", "test_pymavlink_udp_flight.py",
                  "test_runner_autopilots.py", "test_training_resume.py", "test_decision_ceiling.py",

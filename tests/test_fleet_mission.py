@@ -1,6 +1,6 @@
 """Fleet mission files (``missions/fleet.py``): launch points listed or on a launch line, system ids, separation and
-altitude layers, the one-line errors, the round trip through the writer, the shipped fleet demo, and the
-single-drone mission commands refusing a fleet file."""
+altitude layers, the one-line errors, the round trip through the writer, and the shipped fleet demo (flown
+in tests/test_fleet_replay.py)."""
 from __future__ import annotations
 
 import copy
@@ -9,7 +9,6 @@ from typing import Any
 
 import pytest
 import yaml
-from cli_harness import run_cli
 from mission_file_helpers import BASE
 
 from missions.fleet import MAX_VEHICLES, Fleet, FleetVehicle
@@ -113,14 +112,3 @@ def test_the_shipped_fleet_demo_is_three_drones_on_a_launch_line():
     assert [(v.name, v.system_id) for v in fleet.vehicles] == [("drone1", 1), ("drone2", 2), ("drone3", 3)]
     assert [(round(v.north_m, 6), round(v.east_m, 6)) for v in fleet.vehicles] == [(0, 0), (0, 40), (0, 80)]
     assert fleet.separation_m == 30 and fleet.altitude_layer_m == 10
-
-
-@pytest.mark.parametrize("command", ["run", "replay"])
-def test_the_single_drone_mission_commands_refuse_a_fleet_file_in_one_line(command):
-    demo = Path(__file__).resolve().parents[1] / "missions" / "library" / "fleet-demo.yaml"
-    extra = ["--connect", "udpin:127.0.0.1:0"] if command == "run" else []
-    policy = Path(__file__).resolve().parents[1] / "policies" / "pretrained" / "hrl-sac.pt"
-    result = run_cli("mission", command, str(demo), "--policy", str(policy), *extra)
-    assert result.code == 2 and result.out == ""
-    assert result.err.strip() == (f"hrlsac mission {command}: error: {demo}: fleet: 3 drones; this command flies "
-                                     "one drone: remove the fleet section to fly the scenario with one")

@@ -14,6 +14,7 @@ from cli_harness import assert_clean_error, run_cli
 from missions.mission_file import load_mission
 from simulation.fleet_replay import replay_fleet
 from autonomy.pilots import ScriptedPilot
+from sitl_bridge.faults import parse_link_faults
 
 SMALL_FLEET = """\
 name: small-fleet
@@ -92,14 +93,24 @@ def test_each_drone_has_its_own_tlog_of_its_own_system(demo_replay):
         assert sources == {system_id}  # the vehicle, and its companion sharing its system id
 
 
-def test_two_fleet_replays_of_a_seed_write_identical_tlogs(small_fleet, tmp_path):
+def test_a_drone_that_loses_its_link_holds_and_two_replays_write_identical_tlogs(small_fleet, tmp_path):
+    """A 12 s two-way outage of drone 2's link in the search: its runner holds (blind) and the fleet's rounds go on
+    without it; once the link is back it searches on, and both drones land at home, never breaching separation.
+    The same seed and faults replayed again write the same bytes."""
     mission = load_mission(small_fleet)
-    reports = [replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3, out=tmp_path / run) for run in "ab"]
+    faults = {"drone2": parse_link_faults("outage=45:12")}
+    reports = [replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3, out=tmp_path / run, link_faults=faults)
+               for run in "ab"]
+    report = reports[0]
+    first, second = report["vehicles"]
+    assert any(e["event"] == "link" and "holding position" in e["reason"] for e in second["events"])
+    assert not any(e["event"] == "link" for e in first["events"])
+    assert report["success"] and report["all_completed"] and not report["separation"]["breached"]
+    assert report["link_faults"] == {"drone2": "both ways outage=45:12"}
     assert reports[0] == reports[1]
     for name in ("drone1", "drone2"):
         tlogs = [(tmp_path / run / name / "flight.tlog").read_bytes() for run in "ab"]
         assert tlogs[0] == tlogs[1] and len(tlogs[0]) > 100_000
-    assert reports[0]["success"] and reports[0]["all_completed"]
 
 
 def test_the_shipped_policy_flies_each_drone_of_a_fleet(small_fleet, tmp_path):
@@ -127,7 +138,7 @@ def test_a_drone_that_goes_home_early_leaves_its_water_to_the_other(small_fleet)
 
 
 @pytest.mark.parametrize("flags, mentions", [
-    (["--link-faults", "loss=0.1"], ("--link-faults", "fleet")),
+    (["--signing-key", "link.key"], ("--signing-key", "fleet")),
 ])
 def test_fleet_replay_options_it_cannot_take_are_one_line_errors(small_fleet, tmp_path, flags, mentions):
     out = tmp_path / "never"
