@@ -4,6 +4,7 @@ three drones that all land at home without a separation breach; replays are byte
 artifact flies a fleet too; a drone that leaves early leaves its water to the others; bad input gets one line."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import pytest
 from pymavlink import mavutil
 
 from cli_harness import assert_clean_error, run_cli
+from missions.fleet import Fleet
 from missions.mission_file import load_mission
 from simulation.fleet_replay import replay_fleet
 from autonomy.pilots import ScriptedPilot
@@ -111,6 +113,20 @@ def test_a_drone_that_loses_its_link_holds_and_two_replays_write_identical_tlogs
     for name in ("drone1", "drone2"):
         tlogs = [(tmp_path / run / name / "flight.tlog").read_bytes() for run in "ab"]
         assert tlogs[0] == tlogs[1] and len(tlogs[0]) > 100_000
+
+
+def test_the_shield_keeps_two_drones_flying_the_same_pattern_on_one_layer_apart(small_fleet):
+    """Uncoordinated expanding squares from the same datum, both drones on one altitude layer: the two would fly
+    the same track; every setpoint goes through the separation shield, which turns them away from each other."""
+    mission = load_mission(small_fleet)
+    one_layer = dataclasses.replace(mission, fleet=Fleet(mission.fleet.vehicles, separation_m=30.0,
+                                                         altitude_layer_m=0.0))
+    report = replay_fleet(one_layer, ScriptedPilot("expanding_square"), seed=3)
+    separation = report["separation"]
+    assert separation["vertical_m"] == 0.0 and not separation["breached"]
+    assert separation["closest_unlayered_m"] >= 30.0
+    assert all(d["separation_shield_changes"] > 100 for d in report["vehicles"])
+    assert report["success"] and report["all_completed"]
 
 
 def test_the_shipped_policy_flies_each_drone_of_a_fleet(small_fleet, tmp_path):
