@@ -147,7 +147,7 @@ def runner_position(name: str, runner: MissionRunner, now_s: float) -> Position 
     pose = runner.estimator.predict_to(now_s)
     north, east, down = (float(v) for v in pose.position_ned)
     return Position(name, north, east, -down, float(pose.velocity_ned[0]), float(pose.velocity_ned[1]),
-                    airborne=runner.link.armed and runner.height_m() > AIRBORNE_M)
+                    -float(pose.velocity_ned[2]), airborne=runner.link.armed and runner.height_m() > AIRBORNE_M)
 
 
 class FleetRunner:

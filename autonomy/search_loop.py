@@ -30,6 +30,8 @@ from autonomy.takeoff_sequence import TakeoffSequence
 
 LAYER_TOLERANCE_M = 2.0
 """A fleet drone within this of its layer's height (m) is on its layer."""
+HOME_REACHED_M = 5.0
+"""A fleet drone flying home on its layer hands over to RTL this close to its home (m, horizontally)."""
 
 
 class SearchLoop(TakeoffSequence):
@@ -63,22 +65,37 @@ class SearchLoop(TakeoffSequence):
                 self._keep_apart(now)
                 yield from self.tick()
         if self.fleet is not None and self.search_end in END_REASONS:
-            yield from self._climb_to_layer()
+            yield from self._return_on_layer()
 
-    def _climb_to_layer(self) -> Iterator[None]:
-        """A fleet drone climbs back to its own layer before RTL (a close look may have taken it down): the
-        autopilot returns at the altitude it is at, so the drones fly home on their layers."""
-        target = self.mission.flight.altitude_m
-        if abs(self._height_m() - target) <= LAYER_TOLERANCE_M:
+    def _return_on_layer(self) -> Iterator[None]:
+        """A fleet drone flies home itself, on its own layer and through the separation shield, and hands over to
+        the autopilot's RTL above its home, which only descends and lands there: the way home crosses the other
+        drones' paths and landing columns, and the shield acts only on what the runner streams. Anything amiss on
+        the way (blind, a mode change, too long) hands over to RTL at once: the autopilot's return is the safer
+        way home then."""
+        home = self.link.home_position()
+        if home is None:
             return
-        self._event("fleet", f"climbing back to its layer ({target:g} m) before RTL")
-        self._height_target_m = target
-        give_up = self.clock.now() + self.config.takeoff_timeout_s
-        while abs(self._height_m() - target) > LAYER_TOLERANCE_M and self.clock.now() < give_up:
+        home_north, home_east = home_offset_ne(self.mission, home)
+        layer = self.mission.flight.altitude_m
+        self._event("fleet", f"flying home on its layer ({layer:g} m) before RTL")
+        self._height_target_m = layer
+        speed = self.mission.flight.max_speed_mps
+        north, east = self.estimator.predict_to(self.clock.now()).position_ned[:2]
+        give_up = self.clock.now() + math.hypot(north - home_north, east - home_east) / speed * 2.0 + 60.0
+        while self.clock.now() < give_up:
             now = self.clock.now()
             if self._blind(now) is not None or self.link.flight_mode != self.flavour.companion_mode:
-                return  # RTL at once: the autopilot's own return is the safer way home now
-            self.streamer.command(self._separated(VelocityCommand(0.0, 0.0, self._altitude_hold()), now), now)
+                return
+            north, east = self.estimator.predict_to(now).position_ned[:2]
+            to_north, to_east = home_north - north, home_east - east
+            distance = math.hypot(to_north, to_east)
+            if distance <= HOME_REACHED_M and abs(self._height_m() - layer) <= LAYER_TOLERANCE_M:
+                return
+            # full speed, slowing over the last seconds so as to stop over home
+            scale = min(speed, distance / 2.0) / max(distance, 1e-9)
+            command = VelocityCommand(to_north * scale, to_east * scale, self._altitude_hold())
+            self.streamer.command(self._separated(command, now), now)
             yield from self.tick()
 
     def _blind(self, now: float) -> str | None:

@@ -11,10 +11,12 @@ The **shield** (:func:`separated_velocity`) runs on every setpoint a fleet drone
 searches, with the other drones' filtered positions and velocities: for each drone not separated by height and
 within ``horizontal_m`` plus ``lookahead_s`` of flight, it removes the part of the velocity that closes on it and,
 inside ``horizontal_m``, adds a push away; while another drone is that close horizontally, it stops a climb or
-descent that would bring the two within ``vertical_m``. Each drone shields itself, so two closing drones both stop
+descent that would bring the two within ``vertical_m``. A drone that climbs or descends onto this one's height
+(an autopilot's RTL landing through the layers below it, which no shield steers) counts as not separated by height
+while it does. Each drone shields itself, so two closing drones both stop
 closing. Take-off and landing are kept apart by the launch points (``separation_m`` apart, checked when the mission
-file is read) and the return home by the layers: each drone climbs back to its layer before RTL and the autopilot
-returns at the altitude it is at (PX4 ``RTL_RETURN_ALT`` and ArduPilot ``RTL_ALT`` are minimums).
+file is read); the way home is flown by the runner on the drone's layer, through the shield, and the autopilot's
+RTL takes over only above the drone's home, where it descends and lands (``autonomy.search_loop``).
 """
 from __future__ import annotations
 
@@ -29,6 +31,9 @@ from missions.fleet import Fleet
 
 PUSH_MPS = 2.0
 """Speed (m/s) added away from a drone that is inside the horizontal separation."""
+VERTICAL_LOOKAHEAD_S = 10.0
+"""A drone climbing or descending onto another's height within this many seconds is not separated by height from
+it: the other keeps its horizontal distance while it passes (long enough to stop short of it at full speed)."""
 AIRBORNE_M = 1.0
 """Height above its home (m) above which a drone counts as flying (on the ground, separation does not apply)."""
 
@@ -62,6 +67,8 @@ class Position:
     up_m: float
     vn_mps: float = 0.0
     ve_mps: float = 0.0
+    vup_mps: float = 0.0
+    """Climb rate (m/s, up positive)."""
     airborne: bool = True
 
 
@@ -93,7 +100,7 @@ def separated_velocity(own: Position, command: VelocityCommand, others: list[Pos
         if distance >= guard_m:
             continue
         vertical_gap = abs(own.up_m - other.up_m)
-        if rule.vertical_m > 0.0 and vertical_gap >= rule.vertical_m:
+        if rule.vertical_m > 0.0 and vertical_gap >= rule.vertical_m and not _coming_onto(own, other, rule):
             # separated by height: keep it so (no climb or descent towards the other's height)
             towards = -vd if other.up_m > own.up_m else vd  # up is -vd
             if towards > 0.0 and vertical_gap - towards * rule.lookahead_s < rule.vertical_m:
@@ -108,6 +115,14 @@ def separated_velocity(own: Position, command: VelocityCommand, others: list[Pos
         if distance < rule.horizontal_m:
             vn, ve = vn + PUSH_MPS * un, ve + PUSH_MPS * ue
     return VelocityCommand(vn, ve, vd)
+
+
+def _coming_onto(own: Position, other: Position, rule: Separation) -> bool:
+    """Whether ``other`` climbs or descends towards ``own``'s height fast enough to be within ``vertical_m`` of it
+    in ``VERTICAL_LOOKAHEAD_S`` (a drone landing or climbing through a layer: an autopilot's RTL, not shielded)."""
+    above = other.up_m - own.up_m
+    towards = -other.vup_mps if above > 0.0 else other.vup_mps
+    return towards > 0.0 and abs(above) - towards * VERTICAL_LOOKAHEAD_S < rule.vertical_m
 
 
 class SeparationWatch:

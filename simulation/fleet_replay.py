@@ -105,7 +105,7 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
         for spec, vehicle in zip(fleet.vehicles, vehicles):
             state = vehicle.state
             positions.append(Position(spec.name, spec.north_m + state.north_m, spec.east_m + state.east_m,
-                                      -state.down_m, state.vn_mps, state.ve_mps,
+                                      -state.down_m, state.vn_mps, state.ve_mps, -state.vd_mps,
                                       airborne=not state.on_ground and -state.down_m > AIRBORNE_M))
         return positions
 

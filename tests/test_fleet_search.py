@@ -210,3 +210,13 @@ def test_the_watch_counts_each_breach_once_and_the_closest_approach_on_one_layer
     assert summary["breached"] and len(summary["breaches"]) == 1
     assert summary["breaches"][0] == {"time_s": 2.0, "drones": ["a", "b"], "horizontal_m": 25.0, "vertical_m": 2.0}
     assert summary["closest_unlayered_m"] == 22.0
+
+
+def test_a_drone_landing_through_the_layer_counts_as_not_separated_by_height():
+    """A drone 15 m above, descending at 2 m/s (an autopilot's RTL landing at its home: not shielded), will be on
+    this drone's height within 10 s: this drone stops closing on it horizontally. Hovering there, it would not."""
+    own = Position("a", 0.0, 0.0, 50.0)
+    landing = Position("b", 40.0, 0.0, 65.0, vup_mps=-2.0)
+    assert separated_velocity(own, VelocityCommand(10.0, 0.0, 0.0), [landing], RULE, 10.0).vn == pytest.approx(0.0)
+    hovering = Position("b", 40.0, 0.0, 65.0)
+    assert separated_velocity(own, VelocityCommand(10.0, 0.0, 0.0), [hovering], RULE, 10.0).vn == 10.0
