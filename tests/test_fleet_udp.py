@@ -16,8 +16,8 @@ from pymavlink import mavutil
 from test_fleet_replay import SMALL_FLEET
 
 HRLSAC = [sys.executable, "-m", "hrlsac_cli"]
-UDP_FLEET = (SMALL_FLEET.replace("name: small-fleet", "name: udp-fleet").replace("altitude_m: 30", "altitude_m: 10")
-             .replace("max_steps: 400", "max_steps: 10").replace("altitude_layer_m: 10", "altitude_layer_m: 5"))
+UDP_FLEET = (SMALL_FLEET.replace("name: small-fleet", "name: udp-fleet").replace("altitude_m: 20", "altitude_m: 10")
+             .replace("max_steps: 300", "max_steps: 10").replace("altitude_layer_m: 10", "altitude_layer_m: 5"))
 
 
 def test_a_fleet_flies_over_real_udp_against_hrlsac_sitl_count_2(tmp_path):
