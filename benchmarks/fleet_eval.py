@@ -32,12 +32,14 @@ from autonomy.search_pilot import SearchPilot
 from missions.fleet import Fleet, FleetVehicle
 from missions.fleet_search import FleetSearchState
 from missions.mission import FlightSettings, Mission
+from policies.cli.evaluate import read_generator_config
 from policies.evaluation.episodes import episode_batch
 from policies.evaluation.stats import wilson_interval
 from simulation.fleet_replay import FleetEpisode, fly_fleet_episode
 from simulation.worker_pool import add_pool_arguments, pool_from_arguments, run_tasks
 
-AREAS = {"1km": {}, "2km": {"generator": "docs/results/large-area.yaml"}}
+AREAS = {"1km": None, "2km": "docs/results/large-area.yaml"}
+"""Each area's scenario generator config (None: SarSearch-v1's own)."""
 POLICY = "policies/pretrained/hrl-sac.pt"
 SPACING_M = 40.0
 FOUND_BY_S = (120, 240, 480)
@@ -118,8 +120,9 @@ def main() -> int:
     started = time.perf_counter()
     for area in args.areas.split(","):
         count = max(args.episodes, args.environment)
+        environment = {"generator": read_generator_config(AREAS[area])} if AREAS[area] else {}
         scenarios = episode_batch(args.split, count, flight, goal_conditioned=False, task="SarSearch-v1",
-                                  **AREAS[area]).scenarios
+                                  **environment).scenarios
         for pilot, choice in choices.items():
             for size in sizes:
                 key = f"{area}/{pilot}/{size}"
@@ -135,9 +138,11 @@ def main() -> int:
                                 enumerate(missions[:args.environment])]
                     results["environment"][key] = summarise_cell(outcomes)
                     show("environment", key, results["environment"][key], started)
-    write_report(args.out, {"split": args.split, "episodes": args.episodes, "environment_episodes": args.environment,
-                            "flight": dataclasses.asdict(flight), "spacing_m": SPACING_M, "pool": pool.describe(),
-                            **results, "wall_s": time.perf_counter() - started})
+                # after every cell: a long run that stops keeps what it measured
+                write_report(args.out, {"split": args.split, "episodes": args.episodes,
+                                        "environment_episodes": args.environment, "flight": dataclasses.asdict(flight),
+                                        "spacing_m": SPACING_M, "pool": pool.describe(), **results,
+                                        "wall_s": time.perf_counter() - started})
     return 0
 
 
