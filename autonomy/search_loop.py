@@ -24,7 +24,7 @@ from autonomy.geofence import guard_velocity
 from autonomy.mission_state import MissionState
 from autonomy.runner_core import MissionAborted
 from autonomy.search_pilot import END_REASONS, Decision
-from autonomy.separation import Position, separated_velocity
+from autonomy.separation import PUSH_MARGIN_M, Position, separated_velocity
 from autonomy.setpoints import HOLD, VelocityCommand
 from autonomy.takeoff_sequence import TakeoffSequence
 
@@ -32,6 +32,8 @@ LAYER_TOLERANCE_M = 2.0
 """A fleet drone within this of its layer's height (m) is on its layer."""
 HOME_REACHED_M = 5.0
 """A fleet drone flying home on its layer hands over to RTL this close to its home (m, horizontally)."""
+LANDING_CLEARANCE_WAIT_S = 120.0
+"""How long a fleet drone over its home waits at most for the drones below to clear its column before RTL."""
 
 
 class SearchLoop(TakeoffSequence):
@@ -69,8 +71,9 @@ class SearchLoop(TakeoffSequence):
 
     def _return_on_layer(self) -> Iterator[None]:
         """A fleet drone flies home itself, on its own layer and through the separation shield, and hands over to
-        the autopilot's RTL above its home, which only descends and lands there: the way home crosses the other
-        drones' paths and landing columns, and the shield acts only on what the runner streams. Anything amiss on
+        the autopilot's RTL above its home, which only descends and lands there, once the drones below are clear of
+        its column: the way home crosses the other drones' paths and landing columns, and the shield acts only on
+        what the runner streams. Anything amiss on
         the way (blind, a mode change, too long) hands over to RTL at once: the autopilot's return is the safer
         way home then."""
         home = self.link.home_position()
@@ -82,7 +85,9 @@ class SearchLoop(TakeoffSequence):
         self._height_target_m = layer
         speed = self.mission.flight.max_speed_mps
         north, east = self.estimator.predict_to(self.clock.now()).position_ned[:2]
-        give_up = self.clock.now() + math.hypot(north - home_north, east - home_east) / speed * 2.0 + 60.0
+        give_up = (self.clock.now() + math.hypot(north - home_north, east - home_east) / speed * 2.0
+                   + 60.0 + LANDING_CLEARANCE_WAIT_S)
+        waiting_said = False
         while self.clock.now() < give_up:
             now = self.clock.now()
             if self._blind(now) is not None or self.link.flight_mode != self.flavour.companion_mode:
@@ -91,12 +96,32 @@ class SearchLoop(TakeoffSequence):
             to_north, to_east = home_north - north, home_east - east
             distance = math.hypot(to_north, to_east)
             if distance <= HOME_REACHED_M and abs(self._height_m() - layer) <= LAYER_TOLERANCE_M:
-                return
+                if self._column_clear(now):
+                    return
+                if not waiting_said:
+                    waiting_said = True
+                    self._event("fleet", "over home: waiting for the drones below to clear its column before RTL")
             # full speed, slowing over the last seconds so as to stop over home
             scale = min(speed, distance / 2.0) / max(distance, 1e-9)
             command = VelocityCommand(to_north * scale, to_east * scale, self._altitude_hold())
             self.streamer.command(self._separated(command, now), now)
             yield from self.tick()
+
+    def _column_clear(self, now: float) -> bool:
+        """Whether this drone may descend to land: no drone below it flies through its column (within the shield's
+        reach and moving) or hovers inside the separation of it. The autopilot's landing is not shielded, so it
+        starts only when nobody is in its way; a drone that comes later sees it descending and keeps away."""
+        rule = self.fleet.rule
+        north, east, down = (float(v) for v in self.estimator.predict_to(now).position_ned)
+        reach = rule.horizontal_m + rule.lookahead_s * self.mission.flight.max_speed_mps
+        for other in self.fleet.others():
+            if not other.airborne or other.up_m >= -down:
+                continue
+            distance = math.hypot(other.north_m - north, other.east_m - east)
+            moving = math.hypot(other.vn_mps, other.ve_mps) > 1.0
+            if distance < rule.horizontal_m + PUSH_MARGIN_M or (moving and distance < reach):
+                return False
+        return True
 
     def _blind(self, now: float) -> str | None:
         return blind_reason(now, self.link_loss, self.estimator, self.config.link_loss.gap_s)

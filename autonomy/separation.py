@@ -10,13 +10,15 @@ searches in altitude layers (``missions.fleet.Fleet.altitude_layer_m``) and keep
 The **shield** (:func:`separated_velocity`) runs on every setpoint a fleet drone's runner streams while it
 searches, with the other drones' filtered positions and velocities: for each drone not separated by height and
 within ``horizontal_m`` plus ``lookahead_s`` of flight, it removes the part of the velocity that closes on it and,
-inside ``horizontal_m``, adds a push away; while another drone is that close horizontally, it stops a climb or
-descent that would bring the two within ``vertical_m``. A drone that climbs or descends onto this one's height
-(an autopilot's RTL landing through the layers below it, which no shield steers) counts as not separated by height
-while it does. Each drone shields itself, so two closing drones both stop
-closing. Take-off and landing are kept apart by the launch points (``separation_m`` apart, checked when the mission
-file is read); the way home is flown by the runner on the drone's layer, through the shield, and the autopilot's
-RTL takes over only above the drone's home, where it descends and lands (``autonomy.search_loop``).
+within ``PUSH_MARGIN_M`` of ``horizontal_m``, adds a push away; while another drone is that close horizontally,
+it stops a climb or descent that would bring the two within ``vertical_m``. A drone that climbs or descends onto
+this one's height (an autopilot's RTL landing through the layers below it, which no shield steers) counts as not
+separated by height while it does. Each drone shields itself, so two closing drones both stop closing.
+
+Take-off and landing are kept apart by the launch points (``separation_m`` apart, checked when the mission file is
+read); the way home is flown by the runner on the drone's layer, through the shield, and the autopilot's RTL takes
+over only above the drone's home, once no drone below is in its column, where it descends and lands
+(``autonomy.search_loop``).
 """
 from __future__ import annotations
 
@@ -30,7 +32,10 @@ from autonomy.setpoints import VelocityCommand
 from missions.fleet import Fleet
 
 PUSH_MPS = 2.0
-"""Speed (m/s) added away from a drone that is inside the horizontal separation."""
+"""Speed (m/s) added away from a drone that is within ``PUSH_MARGIN_M`` of the horizontal separation."""
+PUSH_MARGIN_M = 5.0
+"""The push starts this far (m) outside the horizontal separation: a drone sliding past another (its closing
+velocity taken out, its velocity along the other's bearing kept) settles outside the separation, not on its edge."""
 VERTICAL_LOOKAHEAD_S = 10.0
 """A drone climbing or descending onto another's height within this many seconds is not separated by height from
 it: the other keeps its horizontal distance while it passes (long enough to stop short of it at full speed)."""
@@ -112,7 +117,7 @@ def separated_velocity(own: Position, command: VelocityCommand, others: list[Pos
         along = vn * un + ve * ue
         if along < 0.0:  # closing: take that part out
             vn, ve = vn - along * un, ve - along * ue
-        if distance < rule.horizontal_m:
+        if distance < rule.horizontal_m + PUSH_MARGIN_M:
             vn, ve = vn + PUSH_MPS * un, ve + PUSH_MPS * ue
     return VelocityCommand(vn, ve, vd)
 
