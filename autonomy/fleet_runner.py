@@ -96,6 +96,16 @@ class FleetDecisions:
         else:
             self._deliver(self.pilot.decide_round(where, handed_in), now_s + self.compute_time_s)
 
+    @property
+    def deciding(self) -> bool:
+        """A round is being decided (in its thread, in real time)."""
+        return self._thread is not None
+
+    def hand_in(self, row: int, position_ne: np.ndarray) -> None:
+        """Drone ``row``'s filtered position for the round that is due."""
+        self._positions[row] = position_ne
+        self._submitted[row] = True
+
     def _deliver(self, decisions: list[Decision | None], release_s: float) -> None:
         if self.found_at_s is None and any(d is not None and d.end == "victim reached" for d in decisions):
             self.found_at_s = release_s
@@ -122,11 +132,10 @@ class FleetSeat:
     def due(self, now_s: float) -> bool:
         fleet = self.decisions
         return (fleet.has_started and now_s + 1e-9 >= fleet.next_round_s and not self.waiting
-                and self._answer is None and fleet._thread is None)
+                and self._answer is None and not fleet.deciding)
 
     def submit(self, position_ne: np.ndarray, now_s: float) -> None:
-        self.decisions._positions[self.row] = position_ne
-        self.decisions._submitted[self.row] = True
+        self.decisions.hand_in(self.row, position_ne)
         self.waiting = True
 
     def hand_back(self, decision: Decision | None, release_s: float) -> None:
