@@ -35,7 +35,7 @@ from missions.mission import FlightSettings, Mission
 from policies.cli.evaluate import read_generator_config
 from policies.evaluation.episodes import episode_batch
 from policies.evaluation.stats import wilson_interval
-from simulation.fleet_replay import FleetEpisode, fly_fleet_episode
+from simulation.fleet_replay import FleetEpisode, fly_exactly, fly_fleet_episode
 from simulation.worker_pool import add_pool_arguments, pool_from_arguments, run_tasks
 
 AREAS = {"1km": None, "2km": "docs/results/large-area.yaml"}
@@ -58,22 +58,14 @@ def fleet_mission(scenario, flight: FlightSettings, size: int) -> Mission:
     return Mission(scenario=scenario, flight=flight, name=scenario.name, fleet=Fleet(vehicles))
 
 
-def fly_exactly(mission: Mission, pilot_choice: PilotChoice, seed: int) -> dict:
-    """The fleet's shared search without MAVLink: every drone flies exactly its decisions."""
+def fly_shared_search(mission: Mission, pilot_choice: PilotChoice, seed: int) -> dict:
+    """The fleet's shared search without MAVLink (``simulation.fleet_replay.fly_exactly``)."""
     state = FleetSearchState(mission, seed)
     pilot = SearchPilot(mission, pilot_choice.load(), seed, state=state)
-    position = state.scen.start.copy()
-    decisions: list = []
-    for _ in range(mission.flight.max_steps + 1):
-        decisions = pilot.decide_round(position, np.ones(state.n, dtype=bool))
-        for row, decision in enumerate(decisions):
-            if decision is not None and decision.end is None:
-                position[row] += np.array(decision.velocity_ne) * mission.flight.step_period_s
-        if not pilot.live.any():
-            break
-    found = any(d is not None and d.end == "victim reached" for d in decisions)
-    ran_dry = [d.end == "endurance exhausted" for d in decisions if d is not None]
-    return {"success": found, "time_s": float(state.time_s[0]) if found else None, "ran_dry": any(ran_dry)}
+    ends = fly_exactly(pilot)
+    found = "victim reached" in ends
+    return {"success": found, "time_s": float(state.time_s[0]) if found else None,
+            "ran_dry": "endurance exhausted" in ends}
 
 
 def summarise_cell(outcomes: list[dict]) -> dict:
@@ -134,7 +126,7 @@ def main() -> int:
                     results["replay"][key] = summarise_cell([replay_outcome(r) for r in reports])
                     show("replay", key, results["replay"][key], started)
                 if args.environment:
-                    outcomes = [fly_exactly(mission, choice, seed) for seed, mission in
+                    outcomes = [fly_shared_search(mission, choice, seed) for seed, mission in
                                 enumerate(missions[:args.environment])]
                     results["environment"][key] = summarise_cell(outcomes)
                     show("environment", key, results["environment"][key], started)

@@ -18,11 +18,13 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from autonomy.fleet_runner import build_fleet, drone_missions
 from autonomy.pilots import PilotChoice
 from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
 from autonomy.runner import RunnerConfig
-from autonomy.search_pilot import FlownPolicy
+from autonomy.search_pilot import FlownPolicy, SearchPilot
 from autonomy.separation import AIRBORNE_M, Position
 from autonomy.vehicle_link import COMPANION_COMPONENT, VehicleLink
 from missions.geodesy import GeoPoint, LocalFrame
@@ -153,3 +155,23 @@ def fly_fleet_episode(episode: FleetEpisode) -> dict:
                            "landed": d["transitions"][-1]["reason"] == "landed and disarmed",
                            "energy_left": d["energy_left"]} for d in report["vehicles"]]
     return report
+
+
+def fly_exactly(pilot: SearchPilot) -> list[str | None]:
+    """A fleet's search without MAVLink or a vehicle: every drone flies exactly its decisions (position += velocity
+    x step period, as the training environment moves it), round after round until every drone's search has ended.
+    Returns each drone's end (``autonomy.search_pilot.END_REASONS``; None if the step limit came first)."""
+    state, flight = pilot.state, pilot.flight
+    position = state.scen.start.copy()
+    ends: list[str | None] = [None] * state.n
+    for _ in range(flight.max_steps + 1):
+        for row, decision in enumerate(pilot.decide_round(position, np.ones(state.n, dtype=bool))):
+            if decision is None:
+                continue
+            if decision.end is None:
+                position[row] += np.array(decision.velocity_ne) * flight.step_period_s
+            else:
+                ends[row] = decision.end
+        if not pilot.live.any():
+            break
+    return ends

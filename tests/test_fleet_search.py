@@ -22,6 +22,7 @@ from missions.goals import cell_centres
 from missions.mission_file import load_mission
 from missions.search_state_v1 import CONFIRMED, NONE, UNRESOLVED
 from missions.searchers.fleet import FleetGreedyBayes
+from simulation.fleet_replay import fly_exactly
 
 FLEET_DEMO = "missions/library/fleet-demo.yaml"
 
@@ -30,21 +31,6 @@ def fleet_of(count: int, spacing_m: float = 40.0):
     mission = load_mission(FLEET_DEMO)
     vehicles = tuple(FleetVehicle(f"drone{i + 1}", i + 1, 0.0, i * spacing_m) for i in range(count))
     return dataclasses.replace(mission, fleet=Fleet(vehicles, separation_m=30.0, altitude_layer_m=10.0))
-
-
-def fly(pilot: SearchPilot, steps: int) -> list:
-    """Every drone flies its decisions exactly (position += velocity x period), as the environment does."""
-    state = pilot.state
-    position = state.scen.start.copy()
-    decisions = []
-    for _ in range(steps):
-        decisions = pilot.decide_round(position, np.ones(state.n, dtype=bool))
-        for row, decision in enumerate(decisions):
-            if decision is not None and decision.end is None:
-                position[row] += np.array(decision.velocity_ne) * pilot.flight.step_period_s
-        if not pilot.live.any():
-            break
-    return decisions
 
 
 def test_a_one_drone_fleet_is_the_single_drone_search():
@@ -142,8 +128,7 @@ def test_two_drones_in_one_place_choose_water_apart_and_the_nearest_takes_a_cand
 def test_the_find_ends_every_drones_search(pilot):
     mission = fleet_of(3)
     pilot_ = SearchPilot(mission, ScriptedPilot(pilot), seed=0, state=FleetSearchState(mission, 0))
-    decisions = fly(pilot_, 1200)
-    ends = [d.end for d in decisions if d is not None]
+    ends = fly_exactly(pilot_)
     assert "victim reached" in ends
     # in the round of the find, every drone still searching ends too (an uncoordinated pattern may bring several
     # drones to the victim in the same round)
@@ -161,9 +146,9 @@ def test_more_drones_find_sooner_on_the_same_seeds():
         for seed in range(4):
             pilot = SearchPilot(mission, ScriptedPilot("greedy_bayes"), seed=seed,
                                 state=FleetSearchState(mission, seed))
-            decisions = fly(pilot, 1200)
+            ends = fly_exactly(pilot)
             steps.append(int(pilot.state.steps[0]))
-            found += any(d is not None and d.end == "victim reached" for d in decisions)
+            found += "victim reached" in ends
         medians.append(float(np.median(steps)))
         finds.append(found)
     assert medians[1] < 0.8 * medians[0]
