@@ -1,4 +1,5 @@
-"""The mission runner: a state machine that flies a search with a trained policy over MAVLink.
+"""The mission runner: a state machine that flies a search with a policy (or a scripted searcher) over MAVLink;
+one per drone in a fleet (``autonomy.fleet_runner``).
 
     CONNECT -> PREFLIGHT -> ARM -> TAKEOFF -> OFFBOARD -> SEARCH -> RTL -> LAND -> DONE
                                                      (any failure or failsafe -> RTL, or DONE with the reason)

@@ -10,6 +10,11 @@ While the runner cannot see the drone (a link outage, a stale pose: ``autonomy.f
 (zero velocity) and takes no decision. Every tick ``autonomy.failsafes.judge_search`` says whether the search goes
 on, waits for lost telemetry, ends (then the runner returns home), or resumes after the vehicle's own link-loss
 failsafe (:mod:`autonomy.link_loss`): OFFBOARD is asked for again and the search carries on from the same state.
+
+A drone flying in a fleet (``autonomy.fleet_runner``) gets its decisions from its seat in the fleet's rounds instead
+(the runner's :class:`autonomy.search_pilot.DecisionSource`), waits for the others before its first one, streams
+every setpoint through the separation shield (:mod:`autonomy.separation`), and when its search ends flies home on
+its own layer and hands over to RTL above its home once its column is clear.
 """
 from __future__ import annotations
 
