@@ -28,7 +28,8 @@ fusing both makes the filter over-confident (up to sqrt(2) in std). Feed one whe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Callable
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -92,9 +93,9 @@ class EstimatorConfig:
         # The defaults are sound for any autopilot's telemetry, so an error suggests the default to go back to.
         allowed = {"max_consecutive_rejections": COUNT, "converged_min_updates": COUNT,
                    "late_tolerance_s": NON_NEGATIVE}
-        for field in (f for f in fields(self) if f.name != "model"):
-            check_in("EstimatorConfig", field.name, getattr(self, field.name), allowed.get(field.name, POSITIVE),
-                     hint=f"; try the default {field.default!r}")
+        for option in (f for f in fields(self) if f.name != "model"):
+            check_in("EstimatorConfig", option.name, getattr(self, option.name), allowed.get(option.name, POSITIVE),
+                     hint=f"; try the default {option.default!r}")
         if self.late_tolerance_s >= self.reboot_backstep_s:
             raise ValueError(f"EstimatorConfig.late_tolerance_s must be below reboot_backstep_s "
                              f"({self.reboot_backstep_s!r}), got {self.late_tolerance_s!r}; try the default 0.02")
@@ -111,9 +112,14 @@ class PoseEstimate:
     time_s: float
     position_ned: np.ndarray
     velocity_ned: np.ndarray
-    covariance: np.ndarray
     age_s: float
     stale: bool
+    predict_covariance: Callable[[], np.ndarray] = field(repr=False, compare=False)
+    """Works the covariance out when asked: the runner predicts every tick and reads only the pose."""
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self.predict_covariance()
 
 
 class PoseEstimator:
@@ -131,6 +137,7 @@ class PoseEstimator:
         self._order = MODELS[config.model]
         self._kf = KalmanFilter(dim_x=3 * self._order, dim_z=6)
         self._kf.H = np.eye(6, 3 * self._order)  # we measure position and velocity, not acceleration
+        self._filter_changes = 0  # counts every change of the filter's state (predict_to's answer is kept until one)
         self._std = {LOCAL_POSITION_NED: (config.local_position_std_m, config.local_velocity_std_mps),
                      GLOBAL_POSITION_INT: (config.global_position_std_m, config.global_velocity_std_mps)}
         self._time_s: float | None = None  # time of the filter state
@@ -144,6 +151,10 @@ class PoseEstimator:
         self._pending_reason = ""  # why the next initialisation is a re-initialisation (restart)
         self._predicted: tuple[tuple, PoseEstimate] | None = None  # the last prediction and what it was made from
         axes = np.arange(3)
+        self._identity = np.eye(3 * self._order)
+        self._dt_entries = (np.concatenate([3 * i + axes for i in range(self._order - 1)]),
+                            np.concatenate([3 * (i + 1) + axes for i in range(self._order - 1)]))
+        self._half_dt2_entries = (axes, 6 + axes)
         self._blocks = (np.array([3 * i + axes for i in range(self._order) for _ in range(self._order)]).ravel(),
                         np.array([3 * j + axes for _ in range(self._order) for j in range(self._order)]).ravel())
 
@@ -199,6 +210,7 @@ class PoseEstimator:
         if dt > 0.0:  # a dropped message just makes this step longer, and its process noise larger
             F, Q = self._transition(dt)
             self._kf.predict(F=F, Q=Q)
+            self._filter_changes += 1
             self._time_s = time_s
         R = self._measurement_covariance(source)
         H, x, P = self._kf.H, self._kf.x[:, 0], self._kf.P
@@ -210,6 +222,7 @@ class PoseEstimator:
             self.rejected_outliers += 1
             return "rejected"
         self._kf.update(z, R=R)
+        self._filter_changes += 1
         self._rejections_in_a_row = 0
         self._updates_since_init += 1
         self._last_fused_s = time_s
@@ -226,15 +239,16 @@ class PoseEstimator:
             raise RuntimeError("PoseEstimator has no estimate yet; feed it telemetry first")
         # asked many times a tick (the runner's guards, a fleet's separation shield): the same answer until the
         # filter or the time changes
-        key = (time_s, self._time_s, self._last_fused_s, self._kf.x.tobytes(), self._kf.P.tobytes())
+        key = (time_s, self._filter_changes)
         if self._predicted is not None and self._predicted[0] == key:
             return self._predicted[1]
         dt = max(0.0, time_s - self._time_s)
-        F, Q = self._transition(dt)
+        F = self._state_transition(dt)
         x = F @ self._kf.x[:, 0]
-        P = F @ self._kf.P @ F.T + Q
+        P = self._kf.P  # filterpy replaces P on every change, so this one stays the covariance at the filter time
         age_s = self._time_s + dt - self._last_fused_s
-        estimate = PoseEstimate(self._time_s + dt, x[:3], x[3:6], P, age_s, age_s > self.config.max_message_age_s)
+        estimate = PoseEstimate(self._time_s + dt, x[:3], x[3:6], age_s, age_s > self.config.max_message_age_s,
+                                lambda: F @ P @ F.T + self._process_noise(dt))
         self._predicted = (key, estimate)
         return estimate
 
@@ -275,18 +289,31 @@ class PoseEstimator:
         the one-axis matrices becomes a 3 x 3 diagonal block, as ``np.kron(one_axis, np.eye(3))`` and filterpy's
         ``Q_continuous_white_noise(..., block_size=3, order_by_dim=False)`` place them (written out: asked for on
         every tick, those two cost more than the rest of the filter)."""
-        order = self._order
-        one_axis = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])[:order, :order]
-        if order == 2:
+        return self._state_transition(dt), self._process_noise(dt)
+
+    def _state_transition(self, dt: float) -> np.ndarray:
+        """F of :meth:`_transition`: the identity with dt (and dt^2 / 2) in the blocks above the diagonal."""
+        F = self._identity.copy()
+        F[self._dt_entries] = dt
+        if self._order == 3:
+            F[self._half_dt2_entries] = 0.5 * dt * dt
+        return F
+
+    def _process_noise(self, dt: float) -> np.ndarray:
+        """Q of :meth:`_transition`."""
+        if self._order == 2:
             noise = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
         else:
             noise = np.array([[dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0], [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
                               [dt**3 / 6.0, dt**2 / 2.0, dt]])
+        return self._spread(noise) * self.config.process_noise_psd
+
+    def _spread(self, one_axis: np.ndarray) -> np.ndarray:
+        """A one-axis matrix with each entry made a 3 x 3 diagonal block (``np.kron(one_axis, np.eye(3))``)."""
         rows, cols = self._blocks
-        F, Q = np.zeros((3 * order, 3 * order)), np.zeros((3 * order, 3 * order))
-        F[rows, cols] = np.repeat(one_axis.ravel(), 3)
-        Q[rows, cols] = np.repeat(noise.ravel(), 3)
-        return F, Q * self.config.process_noise_psd
+        spread = np.zeros((3 * self._order, 3 * self._order))
+        spread[rows, cols] = np.repeat(one_axis.ravel(), 3)
+        return spread
 
     def _measurement_covariance(self, source: str) -> np.ndarray:
         position_std, velocity_std = self._std[source]
@@ -300,6 +327,7 @@ class PoseEstimator:
         extra = [INITIAL_ACCELERATION_STD_MPS2**2] * (3 * self._order - 6)
         self._kf.x = x[:, None]
         self._kf.P = np.diag(np.concatenate([variances, extra]))
+        self._filter_changes += 1
         self._time_s = self._last_fused_s = time_s
         self._last_seen_s = {source: time_s}  # other sources' times belong to the old timeline
         self._rejections_in_a_row = 0

@@ -58,17 +58,18 @@ class FleetDecisions:
         """When a round brought the find (a drone confirmed the victim and reached it)."""
         self.started_at_s: float | None = None
         """When the drones started searching together."""
-        """When a round brought the find (a drone confirmed the victim and reached it)."""
         self._positions = np.zeros((n, 2))
         self._submitted = np.zeros(n, dtype=bool)
         self._thread: threading.Thread | None = None
         self._result: list[Decision | None] | None = None
 
-    def settle(self, now_s: float, out: np.ndarray, positions: Callable[[], np.ndarray]) -> None:
+    def settle(self, now_s: float, out: list[bool], positions: Callable[[], np.ndarray]) -> None:
         """After every tick of every runner: start the search once everyone still flying is ready, and decide a
         round when one is due and handed in. ``out``: drones that will not search (any more); ``positions()``
         (N, 2): every drone's filtered position, for the drones that hand in none this round."""
-        self.out |= out
+        for row, gone in enumerate(out):
+            if gone:
+                self.out[row] = True
         if not self.has_started:
             if self.ready.any() and np.all(self.ready | self.out):
                 self.has_started, self.next_round_s = True, now_s
@@ -169,20 +170,30 @@ class FleetRunner:
         self.clock = runners[0].clock
         self.watch = watch
         self.truth = truth or self.estimated_positions
+        self._runner_of = dict(zip(names, runners))
         self._done = [False] * len(runners)
-        self._estimated: tuple[float, list[Position]] | None = None
+        self._estimated: dict[str, tuple[float, Position | None]] = {}
 
     def estimated_positions(self) -> list[Position]:
-        """Every drone as its runner sees it now (worked out once a tick: every runner's shield asks)."""
-        now = self.clock.now()
-        if self._estimated is None or self._estimated[0] != now:
-            found = (runner_position(name, runner, now) for name, runner in zip(self.names, self.runners))
-            self._estimated = (now, [position for position in found if position is not None])
-        return self._estimated[1]
+        """Every drone as its runner sees it now."""
+        return self._positions_now(self.names)
 
     def others(self, name: str) -> Callable[[], list[Position]]:
         """What a runner's shield is given: the other drones as their runners see them."""
-        return lambda: [position for position in self.estimated_positions() if position.name != name]
+        others = [other for other in self.names if other != name]
+        return lambda: self._positions_now(others)
+
+    def _positions_now(self, names: list[str]) -> list[Position]:
+        """``names``' drones as their runners see them now (each worked out once a tick: several shields ask)."""
+        now = self.clock.now()
+        positions = []
+        for name in names:
+            known = self._estimated.get(name)
+            if known is None or known[0] != now:
+                known = self._estimated[name] = (now, runner_position(name, self._runner_of[name], now))
+            if known[1] is not None:
+                positions.append(known[1])
+        return positions
 
     def run(self) -> dict:
         for _ in self.flight():
@@ -200,7 +211,7 @@ class FleetRunner:
                     except StopIteration:
                         self._done[i] = True
             now = self.clock.now()
-            out = np.array([done or runner.state in _LEFT_THE_SEARCH for done, runner in zip(self._done, self.runners)])
+            out = [done or runner.state in _LEFT_THE_SEARCH for done, runner in zip(self._done, self.runners)]
             self.decisions.settle(now, out, lambda: self._positions_ne(now))
             self.watch.observe(now, self.truth())
             yield

@@ -46,6 +46,8 @@ class SearchLoop(TakeoffSequence):
 
     def _search(self) -> Iterator[None]:
         self.worker.begin(self.clock.now(), self.mission.flight.step_period_s)
+        if self.fleet is not None:
+            self.streamer.shape = self._shielded
         if not self.worker.started():  # a fleet's drones start searching together
             self._event("fleet", "waiting for the other drones to reach their search altitudes")
             yield from self.wait_until(self.worker.started, self.config.takeoff_timeout_s,
@@ -69,7 +71,6 @@ class SearchLoop(TakeoffSequence):
                 yield from self._apply(decision, now)
             yield from self._check_failsafes(now)
             if self.search_end is None:
-                self._keep_apart(now)
                 yield from self.tick()
         if self.fleet is not None and self.search_end in END_REASONS:
             yield from self._return_on_layer()
@@ -93,24 +94,27 @@ class SearchLoop(TakeoffSequence):
         give_up = (self.clock.now() + math.hypot(north - home_north, east - home_east) / speed * 2.0
                    + 60.0 + LANDING_CLEARANCE_WAIT_S)
         waiting_said = False
-        while self.clock.now() < give_up:
-            now = self.clock.now()
-            if self._blind(now) is not None or self.link.flight_mode != self.flavour.companion_mode:
-                return
-            north, east = self.estimator.predict_to(now).position_ned[:2]
-            to_north, to_east = home_north - north, home_east - east
-            distance = math.hypot(to_north, to_east)
-            if distance <= HOME_REACHED_M and abs(self._height_m() - layer) <= LAYER_TOLERANCE_M:
-                if self._column_clear(now):
+        try:
+            while self.clock.now() < give_up:
+                now = self.clock.now()
+                if self._blind(now) is not None or self.link.flight_mode != self.flavour.companion_mode:
                     return
-                if not waiting_said:
-                    waiting_said = True
-                    self._event("fleet", "over home: waiting for the drones below to clear its column before RTL")
-            # full speed, slowing over the last seconds so as to stop over home
-            scale = min(speed, distance / 2.0) / max(distance, 1e-9)
-            command = VelocityCommand(to_north * scale, to_east * scale, self._altitude_hold())
-            self.streamer.command(self._separated(command, now), now)
-            yield from self.tick()
+                north, east = self.estimator.predict_to(now).position_ned[:2]
+                to_north, to_east = home_north - north, home_east - east
+                distance = math.hypot(to_north, to_east)
+                if distance <= HOME_REACHED_M and abs(self._height_m() - layer) <= LAYER_TOLERANCE_M:
+                    if self._column_clear(now):
+                        return
+                    if not waiting_said:
+                        waiting_said = True
+                        self._event("fleet", "over home: waiting for the drones below to clear its column before RTL")
+                # full speed, slowing over the last seconds so as to stop over home; shielded as it goes out
+                scale = min(speed, distance / 2.0) / max(distance, 1e-9)
+                self._wanted = VelocityCommand(to_north * scale, to_east * scale, self._altitude_hold())
+                self.streamer.command(self._wanted, now)
+                yield from self.tick()
+        finally:
+            self._wanted = None  # RTL from here: nothing of ours to shield
 
     def _column_clear(self, now: float) -> bool:
         """Whether this drone may descend to land: no drone below it flies through its column (within the shield's
@@ -154,7 +158,7 @@ class SearchLoop(TakeoffSequence):
         wanted = decision.altitude_m
         self._height_target_m = self.mission.flight.altitude_m if wanted is None else float(wanted)
         self._wanted = VelocityCommand(vn, ve, self._altitude_hold())
-        self.streamer.command(self._separated(self._wanted, now), now)
+        self.streamer.command(self._wanted, now)
         self._set_zoom(decision.zoom)
 
     def _separated(self, command: VelocityCommand, now: float) -> VelocityCommand:
@@ -170,13 +174,10 @@ class SearchLoop(TakeoffSequence):
             self.fleet.shielded += 1
         return shielded
 
-    def _keep_apart(self, now: float) -> None:
-        """Between decisions, the latest command shielded again against where the other drones are now."""
-        if self.fleet is None or self._wanted is None:
-            return
-        shielded = self.streamer.clamp(self._separated(self._wanted, now))
-        if shielded != self.streamer.latest:
-            self.streamer.amend(shielded)
+    def _shielded(self, command: VelocityCommand, now: float) -> VelocityCommand:
+        """A fleet drone's setpoint as it goes out (the streamer's ``shape``): through the shield against where the
+        other drones are now, while the runner flies a command of its own (not while it holds, blind)."""
+        return command if self._wanted is None else self._separated(command, now)
 
     def _check_failsafes(self, now: float) -> Iterator[None]:
         """Act on ``autonomy.failsafes.judge_search``: wait for lost telemetry (said once), end or resume."""

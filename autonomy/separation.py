@@ -25,7 +25,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from autonomy.search_pilot import DecisionSource
 from autonomy.setpoints import VelocityCommand
@@ -62,9 +62,9 @@ class Separation:
                 or abs(a.up_m - b.up_m) >= self.vertical_m > 0.0)
 
 
-@dataclass(frozen=True)
-class Position:
-    """Where a drone is (mission frame: metres north, east and up from the mission's home) and how it moves."""
+class Position(NamedTuple):
+    """Where a drone is (mission frame: metres north, east and up from the mission's home) and how it moves (a
+    tuple: every runner makes one for every drone on every tick)."""
 
     name: str
     north_m: float

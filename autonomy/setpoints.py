@@ -66,6 +66,9 @@ class SetpointStreamer:
         """``send(command, now_s)`` puts one SET_POSITION_TARGET_LOCAL_NED on the link."""
         self.config = config
         self._send = send
+        self.shape: Callable[[VelocityCommand, float], VelocityCommand] | None = None
+        """Changes each setpoint as it goes out (``shape(command, now_s)``, then clamped), except the hold of a
+        stale decision: a fleet's separation shield, judged on the pose at the moment the setpoint is sent."""
         self.period_s = 1.0 / config.rate_hz
         self.running = False
         self.latest = HOLD
@@ -90,12 +93,6 @@ class SetpointStreamer:
         self.latest_at_s = now_s
         return self.latest
 
-    def amend(self, command: VelocityCommand) -> VelocityCommand:
-        """Change what is streamed without counting it as a fresh decision (the stale timer runs on): a fleet's
-        separation shield correcting the latest decision between two decisions."""
-        self.latest = self.clamp(command)
-        return self.latest
-
     def clamp(self, command: VelocityCommand) -> VelocityCommand:
         """Horizontal speed scaled down to its limit (direction kept), vertical clipped; NaN/inf -> hold."""
         values = (command.vn, command.ve, command.vd)
@@ -116,7 +113,10 @@ class SetpointStreamer:
         """Send if a period is due; returns whether a setpoint went out. Call at least at ``rate_hz``."""
         if not self.running or now_s + 1e-9 < self.next_send_s:
             return False
-        self._send(self.current(now_s), now_s)
+        command = self.current(now_s)
+        if self.shape is not None and not self.stale:
+            command = self.clamp(self.shape(command, now_s))
+        self._send(command, now_s)
         self.sent += 1
         # Next send one period after the scheduled one (not after now): the rate stays exact even when
         # ticks jitter; after a long stall (or at the first send), skip missed periods instead of a burst.

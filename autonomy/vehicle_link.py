@@ -112,6 +112,7 @@ class VehicleLink:
     _params_wanted: set = field(default_factory=set, init=False)
     _vehicle_signs: bool = field(default=False, init=False)
     _next_heartbeat_s: float = -math.inf  # the first tick sends and anchors the 1 Hz schedule
+    _home_read: tuple = field(default=(None, None), init=False)  # (HOME_POSITION message, its GeoPoint or None)
     timesync_replies: list = field(default_factory=list, init=False)
     """ts1 of the TIMESYNC replies received since the runner last took them (autonomy.uplink_probe)."""
 
@@ -282,10 +283,13 @@ class VehicleLink:
         home = self.latest.get("HOME_POSITION")
         if home is None:
             return None
-        try:
-            return GeoPoint(home.latitude / 1e7, home.longitude / 1e7, home.altitude / 1000.0)
-        except ValueError:
-            return None
+        if self._home_read[0] is not home:  # read once per message: the runner asks every tick
+            try:
+                point = GeoPoint(home.latitude / 1e7, home.longitude / 1e7, home.altitude / 1000.0)
+            except ValueError:
+                point = None
+            self._home_read = (home, point)
+        return self._home_read[1]
 
     def home_altitude_amsl(self) -> float | None:
         """Home's altitude above mean sea level (m), from HOME_POSITION; None before it arrived."""

@@ -201,6 +201,16 @@ class MemoryMavConnection(mavutil.mavfile):
         data, self._pending = bytes(self._pending[:n]), self._pending[n:]
         return data
 
+    def recv_msg(self):
+        """pymavlink's receive, returning at once when nothing arrived and nothing is part-parsed (the runner asks
+        every tick, and most ticks bring nothing)."""
+        if not self._pending and self.mav.buf_len() == 0:
+            for chunk in self.link.receive():
+                self._pending += chunk
+            if not self._pending:
+                return None
+        return super().recv_msg()
+
     def write(self, buf: bytes) -> None:
         self.link.send(buf)
 
