@@ -1,8 +1,9 @@
 """``hrlsac mission run FLEET.yaml --pilot NAME | --policy P.pt --connect URL --connect URL ...``: fly a fleet mission
 in real time, one connection per drone in the fleet's order (PX4 SITL instance N on ``udpin:0.0.0.0:14540+N``,
-``hrlsac sitl --count N`` alike), every drone on one wall clock (``autonomy.fleet_runner``), the decision rounds in
-their own thread. Writes ``report.json`` (rewritten while flying, ``"complete": false`` until the end) and one folder
-per drone with its ``flight.tlog``.
+``hrlsac sitl --count N`` alike), or one ``udpin`` ground-station port carrying every drone, told apart by the fleet
+section's system ids (``autonomy.shared_port``); every drone on one wall clock (``autonomy.fleet_runner``), the
+decision rounds in their own thread. Writes ``report.json`` (rewritten while flying, ``"complete": false`` until
+the end) and one folder per drone with its ``flight.tlog``.
 """
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ from autonomy.fleet_runner import build_fleet, fleet_summary
 from autonomy.recorder import REPORT, TLOG, PartialReport, TlogRecorder
 from autonomy.runner import WallClock
 from autonomy.search_pilot import FlownPolicy
-from autonomy.vehicle_link import LinkError, VehicleLink, open_connection
+from autonomy.shared_port import open_shared_port
+from autonomy.vehicle_link import COMPANION_COMPONENT, LinkError, VehicleLink, open_connection
 from mavlink_signing import wall_timestamp
 from missions.mission import Mission
 
@@ -23,9 +25,12 @@ def run_fleet(mission: Mission, policy: FlownPolicy, args: argparse.Namespace, o
     clock = WallClock()
     tlogs: list[TlogRecorder] = []
     links: list[VehicleLink] = []
+    shared = len(args.connect) == 1 and len(mission.fleet.vehicles) > 1
     try:
-        for vehicle, url in zip(mission.fleet.vehicles, args.connect):
-            connection = open_connection(url, vehicle.system_id)
+        port = open_shared_port(args.connect[0]) if shared else None
+        for vehicle, url in zip(mission.fleet.vehicles, args.connect * len(mission.fleet.vehicles)):
+            connection = (port.channel(vehicle.system_id, COMPANION_COMPONENT) if port is not None
+                          else open_connection(url, vehicle.system_id))
             folder = out / vehicle.name
             folder.mkdir(parents=True, exist_ok=True)
             tlogs.append(TlogRecorder(folder / TLOG, clock.started_unix_us))

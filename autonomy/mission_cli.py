@@ -80,7 +80,8 @@ def main(argv: list[str], prog: str = "hrlsac mission run") -> int:
     parser.add_argument("--connect", required=True, action="append", metavar="URL",
                         help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]; a fleet "
                              "mission: once per drone, in the fleet's order (PX4 SITL instance N: udpin:0.0.0.0:"
-                             "14540+N)")
+                             "14540+N), or once with a ground station's udpin port that carries every drone "
+                             "(udpin:0.0.0.0:14550), the drones told apart by their system ids")
     parser.add_argument("--backend", choices=("pymavlink", "mavsdk"), default="pymavlink",
                         help="MAVLink client: pymavlink (records a tlog) or MAVSDK (Offboard.set_velocity_ned)")
     args = parser.parse_args(argv)
@@ -88,11 +89,17 @@ def main(argv: list[str], prog: str = "hrlsac mission run") -> int:
     def check(args: argparse.Namespace, mission: Mission) -> None:
         if args.signing_key and args.backend == "mavsdk":
             raise ValueError("--signing-key needs --backend pymavlink (MAVSDK's Python API cannot sign)")
+        from autonomy.shared_port import is_shared_port
+
         drones = len(mission.fleet.vehicles) if mission.fleet is not None else 1
-        if len(args.connect) != drones:
+        if drones > 1 and len(args.connect) == 1 and not is_shared_port(args.connect[0]):
+            raise ValueError(f"--connect {args.connect[0]} for all {drones} drones of {args.mission}: one connection "
+                             "carries a fleet only as a ground station's udpin:HOST:PORT; or give one --connect per "
+                             "drone")
+        if len(args.connect) != drones and not (drones > 1 and len(args.connect) == 1):
             raise ValueError(f"--connect given {len(args.connect)} times: {args.mission} flies {drones} "
                              f"drone{'s' if drones > 1 else ''}, one --connect each" +
-                             (" (in the fleet's order)" if drones > 1 else ""))
+                             (" (in the fleet's order), or one udpin port for all" if drones > 1 else ""))
         if drones > 1 and args.backend == "mavsdk":
             raise ValueError("a fleet flies with --backend pymavlink (one tlog per drone)")
 

@@ -165,11 +165,16 @@ def test_fleet_replay_options_it_cannot_take_are_one_line_errors(small_fleet, tm
     assert not out.exists()
 
 
-def test_a_fleet_run_needs_one_connection_per_drone(small_fleet, tmp_path):
+def test_a_fleet_run_needs_one_connection_per_drone_or_one_ground_station_port(small_fleet, tmp_path):
     out = tmp_path / "never"
     result = run_cli("mission", "run", str(small_fleet), "--pilot", "greedy_bayes", "--out", str(out),
-                     "--connect", "udpin:127.0.0.1:14540")
-    assert_clean_error(result, "--connect given 1 times", "2 drones")
+                     "--connect", "udpout:127.0.0.1:14540")
+    assert_clean_error(result, "--connect udpout:127.0.0.1:14540 for all 2 drones",
+                       "only as a ground station's udpin:HOST:PORT")
+    assert not out.exists()
+    three = run_cli("mission", "run", str(small_fleet), "--pilot", "greedy_bayes", "--out", str(out),
+                    *[arg for port in (14540, 14541, 14542) for arg in ("--connect", f"udpin:127.0.0.1:{port}")])
+    assert_clean_error(three, "--connect given 3 times", "2 drones", "or one udpin port for all")
     assert not out.exists()
     single = run_cli("mission", "run", "missions/library/demo.yaml", "--pilot", "greedy_bayes", "--out", str(out),
                      "--connect", "udpin:127.0.0.1:14540", "--connect", "udpin:127.0.0.1:14541")
