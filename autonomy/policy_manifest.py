@@ -92,7 +92,8 @@ class PolicyManifest:
     format: str
     """"torchscript" or "torch-export"."""
     algorithm: str
-    """"hrl-sac" (meta-controller + low level) or "sac" (flat: ``select_goal`` returns -1, no goal)."""
+    """"hrl-sac" (meta-controller + low level), "sac" (flat: ``select_goal`` returns -1, no goal) or "sb3-sac" (a
+    Stable-Baselines3 SAC, flat like "sac"; ``training_config`` then names its trainer and SB3's settings)."""
     subgoal_interval: int | None
     """K, low-level steps between goal decisions; None for flat SAC."""
     goals: tuple[GoalSpec, ...]
@@ -235,6 +236,7 @@ def _brief_json(value: Any, limit: int = 60) -> str:
 def summary_lines(manifest: PolicyManifest) -> list[str]:
     """A short human summary (``hrlsac export`` prints it, ``hrlsac policy info`` starts with it)."""
     config, source = manifest.training_config, manifest.source_checkpoint
+    trainer = config.get("trainer") or f"{config.get('preset')} preset"  # another library's, or hrlsac's preset
     hierarchy = (f"K = {manifest.subgoal_interval}, goals {', '.join(g.name for g in manifest.goals)}"
                  if manifest.hierarchical else "flat (no meta-controller)")
     actions = ", ".join(f"{name} [{low:g}, {high:g}]" for name, low, high
@@ -244,7 +246,7 @@ def summary_lines(manifest: PolicyManifest) -> list[str]:
     return [
         f"{manifest.algorithm} policy, {manifest.format} (artifact format {manifest.format_version}{precision}): "
         f"{hierarchy}",
-        f"  trained: {config.get('preset')} preset, seed {config.get('seed')}, {source.trained_steps:,} steps; "
+        f"  trained: {trainer}, seed {config.get('seed')}, {source.trained_steps:,} steps; "
         f"from {source.file} (sha256 {source.sha256[:16]}...)",
         f"  observation: layout version {manifest.observation.layout_version}, {manifest.observation.dim} values "
         f"(meta-controller {manifest.observation.meta_dim}); actions: {actions}",

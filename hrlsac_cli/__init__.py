@@ -19,7 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("policies.cli.evaluate", "the paper's metrics of a trained run on a scenario split"),
     "dataset": ("missions.dataset_cli", "make the synthetic SAR dataset or inspect a YOLO dataset"),
     "compare": ("policies.cli.compare", "compare trained runs and the scripted baselines: markdown report and figures"),
-    "export": ("policies.cli.export", "write a checkpoint's policy as one self-describing artifact (policy.pt)"),
+    "export": ("policies.cli.export", "write a checkpoint's (or a Stable-Baselines3 SAC's) policy as one "
+                                       "self-describing artifact (policy.pt)"),
     "policy": ("autonomy.policy_cli", "inspect an exported policy artifact (policy info) with the on-board runtime"),
     "mission": ("", "fly a search mission with a policy: replay in the simulated vehicle, or run"),
     "keygen": ("mavlink_signing.keygen_cli", "write a fresh MAVLink 2 signing key file (for --signing-key)"),

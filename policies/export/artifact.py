@@ -22,12 +22,13 @@ import re
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Callable
 
 import torch
 
 from autonomy.artifact_seal import seal
 from autonomy.observation import META_OBS_DIM, OBS_DIM
-from autonomy.policy import ACT_PROGRAM, GOAL_PROGRAM, load_policy
+from autonomy.policy import ACT_PROGRAM, GOAL_PROGRAM, Policy, load_policy
 from autonomy.policy_manifest import (
     FORMAT_VERSION,
     MANIFEST_FILE,
@@ -94,25 +95,43 @@ def export_policy(checkpoint: Path | str, out: Path | str, fmt: str = "torchscri
                   check: bool = False, precision: str = "float32") -> ExportResult:
     """Write the artifact of a checkpoint (file or run folder) to ``out``; ``check``: parity check first;
     ``precision``: "float32" (as trained) or "int8" (``policies.export.module``; docs/export.md, "Precision")."""
-    out = Path(out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise ValueError(f"{out}: the artifact must be a file in an existing folder")
+    out = checked_destination(out)
     policy, sha256 = read_checkpoint(checkpoint)
     evaluation, notes = evaluation_metrics(policy)
     manifest = build_manifest(policy, fmt, sha256, evaluation, precision)
     data = artifact_bytes(policy_module(policy, precision), manifest)
+
+    def parity_of(artifact: Policy) -> Parity:
+        parity = check_parity(policy, artifact, record_observations(policy))
+        if not parity.ok:
+            raise ParityError(f"parity check failed: {parity.summary()}; nothing written")
+        return parity
+
+    parity = write_artifact(out, data, parity_of if check else None)
+    return ExportResult(out, manifest, len(data), parity, notes)
+
+
+def checked_destination(out: Path | str) -> Path:
+    """``out`` as a path, refused (ValueError) unless it names a file in an existing folder."""
+    out = Path(out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise ValueError(f"{out}: the artifact must be a file in an existing folder")
+    return out
+
+
+def write_artifact(out: Path, data: bytes, check: Callable[[Policy], Parity] | None = None) -> Parity | None:
+    """Write the artifact ``data`` to ``out`` through a temporary file renamed into place; ``check`` is first handed
+    the temporary file loaded by the runtime and may refuse it (``ParityError``): then nothing is written."""
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     parity = None
     try:
         tmp.write_bytes(data)
-        if check:
-            parity = check_parity(policy, load_policy(tmp), record_observations(policy))
-            if not parity.ok:
-                raise ParityError(f"parity check failed: {parity.summary()}; nothing written")
+        if check is not None:
+            parity = check(load_policy(tmp))
         os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)
-    return ExportResult(out, manifest, len(data), parity, notes)
+    return parity
 
 
 def read_checkpoint(path: Path | str) -> tuple[CheckpointPolicy, str]:
@@ -170,21 +189,32 @@ def goal_specs() -> tuple[GoalSpec, ...]:
 def build_manifest(policy: CheckpointPolicy, fmt: str, checkpoint_sha256: str,
                    evaluation: dict | str = NOT_EVALUATED, precision: str = "float32") -> PolicyManifest:
     """The manifest of ``policy`` exported in format ``fmt`` and ``precision``."""
+    config = policy.config
+    return flight_manifest(fmt, config.algo, config.action_frame, config.to_dict(),
+                           SourceCheckpoint(policy.path.name, checkpoint_sha256, policy.step), evaluation, precision,
+                           config.flight.subgoal_interval if policy.hierarchical else None)
+
+
+def flight_manifest(fmt: str, algorithm: str, action_frame: str, training_config: dict, source: SourceCheckpoint,
+                    evaluation: dict | str = NOT_EVALUATED, precision: str = "float32",
+                    subgoal_interval: int | None = None) -> PolicyManifest:
+    """The manifest of a policy of ``algorithm`` that acts in ``action_frame`` on this runtime's observation layout,
+    exported from ``source`` in format ``fmt`` and ``precision``; hierarchical (goals, K) when ``subgoal_interval``
+    is given. ``training_config`` is what the runner reads the policy's training settings from (``flight``,
+    ``task``, ``action_frame``)."""
     if precision not in PRECISIONS:
         raise ValueError(f"unknown precision {precision!r} (choose {' or '.join(PRECISIONS)})")
-    config = policy.config
-    names, units = FRAME_SPECS[config.action_frame]
+    names, units = FRAME_SPECS[action_frame]
     return PolicyManifest(
-        format_version=FORMAT_VERSION, format=fmt, algorithm=config.algo,
-        subgoal_interval=config.flight.subgoal_interval if policy.hierarchical else None,
-        goals=goal_specs() if policy.hierarchical else (),
+        format_version=FORMAT_VERSION, format=fmt, algorithm=algorithm, subgoal_interval=subgoal_interval,
+        goals=goal_specs() if subgoal_interval is not None else (),
         observation=ObservationSpec.current(),
         action=ActionSpec(names, tuple(ACTION_LOW.tolist()), tuple(ACTION_HIGH.tolist()), units),
         # Through JSON once, so that the manifest in memory equals the one read back (lists, not tuples).
-        entry_points=ENTRY_POINTS, training_config=json.loads(json.dumps(config.to_dict())), evaluation=evaluation,
-        source_checkpoint=SourceCheckpoint(policy.path.name, checkpoint_sha256, policy.step),
-        torch_version=torch.__version__, created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        precision=precision, action_tolerance=TOLERANCES[precision])
+        entry_points=ENTRY_POINTS, training_config=json.loads(json.dumps(training_config)), evaluation=evaluation,
+        source_checkpoint=source, torch_version=torch.__version__,
+        created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"), precision=precision,
+        action_tolerance=TOLERANCES[precision])
 
 
 def artifact_bytes(module: PolicyModule, manifest: PolicyManifest) -> bytes:

@@ -167,7 +167,8 @@ class NoGoal(nn.Module):
 class PolicyModule(nn.Module):
     """The two entry points of a policy artifact (``forward`` is ``act``, the call made every step)."""
 
-    def __init__(self, action_head: ActionHead, goal_head: GoalHead | NoGoal):
+    def __init__(self, action_head: nn.Module, goal_head: GoalHead | NoGoal):
+        """``action_head``: an :class:`ActionHead` (or its int8 form), or ``policies.export.sb3.SB3ActionHead``."""
         super().__init__()
         self.action_head = action_head
         self.goal_head = goal_head
