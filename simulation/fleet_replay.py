@@ -130,7 +130,6 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
     return report
 
 
-
 @dataclass(frozen=True)
 class FleetEpisode:
     """One fleet replay for one worker (``simulation.worker_pool.run_tasks``): the mission, what flies, the seed."""
@@ -142,18 +141,24 @@ class FleetEpisode:
     """As :func:`replay_fleet`'s."""
     link_faults: dict[str, LinkFaults] | None = None
     """As :func:`replay_fleet`'s."""
+    out: Path | None = None
+    """Where the worker writes the report and the tlogs (None: nothing written)."""
+    start_time: datetime = DEFAULT_START_TIME
+    """As :func:`replay_fleet`'s."""
 
 
 def fly_fleet_episode(episode: FleetEpisode) -> dict:
-    """Fly one fleet episode without writing files; its report without the drones' event logs (a worker's answer
-    stays small): each drone keeps its name, search end, outcome, whether it landed and disarmed, and the search
-    endurance it had left."""
+    """Fly one fleet episode (writing its files to ``episode.out`` if given); its report without the drones' event
+    logs (a worker's answer stays small): each drone keeps its name, search end, outcome, whether it landed and
+    disarmed, its flight time and the search endurance it had left."""
     speak_mavlink2()
-    report = replay_fleet(episode.mission, episode.pilot.load(), seed=episode.seed,
-                          battery_percent=episode.battery_percent, link_faults=episode.link_faults)
+    report = replay_fleet(episode.mission, episode.pilot.load(), seed=episode.seed, out=episode.out,
+                          start_time=episode.start_time, battery_percent=episode.battery_percent,
+                          link_faults=episode.link_faults)
     report["vehicles"] = [{"name": d["name"], "search_end": d["search_end"], "outcome": d["outcome"]["outcome"],
                            "landed": d["transitions"][-1]["reason"] == "landed and disarmed",
-                           "energy_left": d["energy_left"]} for d in report["vehicles"]]
+                           "flight_time_s": d["flight_time_s"], "energy_left": d["energy_left"]}
+                          for d in report["vehicles"]]
     return report
 
 

@@ -19,7 +19,7 @@ from hrlsac_cli import GROUPS
 from simulation import mission_replay
 from hrlsac_cli.progress import progress_bar  # after mission_replay: see above
 from simulation.parallel_replay import ReplayEpisode, replay_episodes
-from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
+from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments, run_tasks
 
 REPLAY_SUMMARY = GROUPS["mission"]["replay"][1]  # written once, in the dispatcher's table
 
@@ -43,7 +43,7 @@ def main(argv: list[str], prog: str = "hrlsac mission replay") -> int:
         return prepared
     mission, policy, out = prepared
     if mission.fleet is not None:
-        return _replay_fleet(mission, policy, args, out)
+        return _replay_fleet(mission, policy, args, out, prog)
     return _replay(mission, policy, args, out, prog)
 
 
@@ -65,33 +65,40 @@ def _check_replay_arguments(args: argparse.Namespace, mission) -> None:
         raise ValueError(str(exc)) from None
 
 
-def _replay_fleet(mission, policy, args, out: Path) -> int:
-    """A fleet mission: each seed flown by the whole fleet in lockstep (``simulation.fleet_replay``), one after
-    the other."""
+def _replay_fleet(mission, policy, args, out: Path, prog: str) -> int:
+    """A fleet mission: each seed flown by the whole fleet in lockstep (``simulation.fleet_replay``); several seeds
+    are tasks on the worker pool (``--workers``, ``--ray``), one folder each."""
     from autonomy.fleet_runner import fleet_summary
-    from simulation.fleet_replay import replay_fleet
+    from simulation.fleet_replay import FleetEpisode, fly_fleet_episode, replay_fleet
 
-    say = print if args.episodes == 1 and not args.quiet else (lambda text: None)
-    started, simulated, found = time.perf_counter(), 0.0, 0
-    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet and args.episodes > 1)
-    for episode in range(args.episodes):
-        seed = args.seed + episode
-        folder = out if args.episodes == 1 else out / f"seed-{seed:05d}"
-        faults = {vehicle.name: args.faults for vehicle in mission.fleet.vehicles} if args.faults else None
-        report = replay_fleet(mission, policy if episode == 0 else args.choice.load(), seed, folder, say=say,
-                              start_time=args.start, link_faults=faults)
-        simulated += max(d["flight_time_s"] for d in report["vehicles"])
-        found += report["success"]
-        progress.update(1)
+    faults = {vehicle.name: args.faults for vehicle in mission.fleet.vehicles} if args.faults else None
+    started = time.perf_counter()
+    if args.episodes == 1:
+        say = (lambda text: None) if args.quiet else print
+        report = replay_fleet(mission, policy, args.seed, out, say=say, start_time=args.start, link_faults=faults)
+        wall = time.perf_counter() - started
+        simulated = max(d["flight_time_s"] for d in report["vehicles"])
+        print(fleet_summary(report))
+        print(f"  {simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time; report: "
+              f"{out / 'report.json'}")
+        return 0
+    episodes = [FleetEpisode(mission, args.choice, args.seed + k, link_faults=faults,
+                             out=out / f"seed-{args.seed + k:05d}", start_time=args.start)
+                for k in range(args.episodes)]
+    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet)
+    try:
+        reports = run_tasks(fly_fleet_episode, episodes, args.pool, lambda index, report: progress.update(1))
+    except WorkerPoolError as exc:
+        progress.close()
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
     progress.close()
     wall = time.perf_counter() - started
-    if args.episodes == 1:
-        print(fleet_summary(report))
-    else:
-        print(f"{mission.name} ({report['pilot']}, {report['drones']} drones): {found}/{args.episodes} searches "
-              "found the victim")
-    print(f"  {simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time; report: "
-          f"{out / 'report.json' if args.episodes == 1 else out}")
+    simulated = sum(max(d["flight_time_s"] for d in report["vehicles"]) for report in reports)
+    found = sum(report["success"] for report in reports)
+    print(f"{mission.name} ({reports[0]['pilot']}, {reports[0]['drones']} drones): {found}/{args.episodes} searches "
+          "found the victim")
+    print(f"  {simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time; report: {out}")
     return 0
 
 

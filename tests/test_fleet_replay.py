@@ -131,14 +131,19 @@ def test_the_shield_keeps_two_drones_flying_the_same_pattern_on_one_layer_apart(
     assert all(d["outcome"]["outcome"] in ("completed", "safe") for d in report["vehicles"])
 
 
-def test_the_shipped_policy_flies_each_drone_of_a_fleet(small_fleet, tmp_path):
+def test_the_shipped_policy_flies_each_drone_of_a_fleet_over_several_seeds(small_fleet, tmp_path):
     result = run_cli("mission", "replay", str(small_fleet), "--policy", "policies/pretrained/hrl-sac.pt",
-                     "--accept-flight-mismatch", "--out", str(tmp_path), "--quiet", "--seed", "1")
+                     "--accept-flight-mismatch", "--out", str(tmp_path), "--quiet", "--seed", "1", "--episodes", "2")
     assert result.code == 0, result.err
-    report = json.loads((tmp_path / "report.json").read_text())
-    assert report["pilot"] == "hrl-sac" and report["drones"] == 2
-    assert report["all_landed"] and not report["separation"]["breached"]
-    assert all(d["outcome"]["outcome"] in ("completed", "safe") for d in report["vehicles"])
+    assert "small-fleet (hrl-sac, 2 drones): " in result.out and "/2 searches found the victim" in result.out
+    for seed in (1, 2):  # one folder per seed, each with the fleet's report and every drone's tlog
+        folder = tmp_path / f"seed-{seed:05d}"
+        report = json.loads((folder / "report.json").read_text())
+        assert report["complete"] and report["seed"] == seed
+        assert report["pilot"] == "hrl-sac" and report["drones"] == 2
+        assert report["all_landed"] and not report["separation"]["breached"]
+        assert all(d["outcome"]["outcome"] in ("completed", "safe") for d in report["vehicles"])
+        assert all((folder / name / "flight.tlog").stat().st_size > 0 for name in ("drone1", "drone2"))
 
 
 def test_a_drone_that_goes_home_early_leaves_its_water_to_the_other(small_fleet):
