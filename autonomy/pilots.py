@@ -4,7 +4,7 @@ Both fly through the same :class:`autonomy.search_pilot.SearchPilot`, so a scrip
 policy gets: the same search state (belief, candidates, close looks, endurance), the same safety shield, bingo
 failsafe, setpoint stream and report. A scripted searcher (``missions.searchers``) reads the search state itself
 (the crew's map, the candidates, the energy left) instead of the observation vector, and answers in the
-"north_east" action frame, as it does in the training environment (SarSearch-v1).
+north-east action frame (``ActionFrame.NORTH_EAST``), as it does in the training environment (SarSearch-v1).
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from autonomy.search_pilot import FlownPolicy
+from missions.action_frames import ActionFrame
 from missions.search_state_v1 import BeliefSearchState
 from missions.searchers import SEARCHERS, TUNED, ScriptedSettings, make_searcher
 from missions.searchers.fleet import FleetGreedyBayes
@@ -28,7 +29,7 @@ class ScriptedPilot:
 
     hierarchical = False
     subgoal_interval = None
-    action_frame = "north_east"
+    action_frame = ActionFrame.NORTH_EAST
 
     def __init__(self, name: str, settings: ScriptedSettings | None = None):
         if name not in SEARCHERS:

@@ -37,6 +37,7 @@ from autonomy.artifact_seal import SealError, ends_with_zip_end, is_sealed, unse
 from autonomy.observation import GOAL_NAMES, META_OBS_DIM, OBS_DIM
 from autonomy.policy_manifest import MANIFEST_FILE, ObservationSpec, PolicyManifest
 from autonomy.torch_compat import pt2_archive, torchscript_calls
+from missions.action_frames import ActionFrame
 from missions.goals import goal_due
 from missions.search_state_v1 import BeliefSearchState
 
@@ -75,10 +76,10 @@ class Policy:
         return self.manifest.subgoal_interval
 
     @property
-    def action_frame(self) -> str:
-        """How its movement is read (``missions.action_frames.ACTION_FRAMES``): as trained, north / east unless the
+    def action_frame(self) -> ActionFrame:
+        """How its movement is read (``missions.action_frames.ActionFrame``): as trained, north / east unless the
         training said otherwise."""
-        return self.manifest.training_config.get("action_frame", "north_east")
+        return ActionFrame(self.manifest.training_config.get("action_frame", ActionFrame.NORTH_EAST))
 
     def goal_due(self, step: int) -> bool:
         """Whether the meta-controller decides at this step of a mission by the clock alone

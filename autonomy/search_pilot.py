@@ -35,7 +35,7 @@ from typing import Protocol
 import numpy as np
 
 from autonomy.observation import LAYOUT_V4, observe_search
-from missions.action_frames import movement_velocity
+from missions.action_frames import ActionFrame, movement_velocity
 from missions.search_state_v1 import CONFIRMED, REJECTED, TARGET_SLOTS, BeliefSearchState
 from missions.goals import GOAL_NAMES, NO_GOAL, RETURN_TO_BASE
 from missions.mission import Mission
@@ -66,8 +66,8 @@ class FlownPolicy(Protocol):
         """K: steps between goal decisions (None: the mission's)."""
 
     @property
-    def action_frame(self) -> str:
-        """How its movement is read (``missions.action_frames.ACTION_FRAMES``)."""
+    def action_frame(self) -> ActionFrame:
+        """How its movement is read."""
 
     def select_goal(self, meta_obs: np.ndarray) -> np.ndarray:
         """The goal index for a meta observation."""

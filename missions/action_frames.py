@@ -6,22 +6,33 @@ air exactly as it was trained.
 """
 from __future__ import annotations
 
+from enum import StrEnum
+
 import numpy as np
 
-ACTION_FRAMES: tuple[str, ...] = ("north_east", "target", "arrive")
-"""How a policy's two movement components are read (``SarSearchConfig.action_frame``, in the artifact's manifest):
 
-* "north_east": velocity north and east, each as a share of the top speed (the paper's; SarSearch-v0's only);
-* "target": towards the observation's target point and to the right of that line, as shares of the top speed, so
-  that flying straight at the target is the constant action (1, 0);
-* "arrive": as "target", with the speed also capped by what covers the rest of the way in one step
-  (:func:`arrival_speed_fraction`), so that (1, 0) flies straight at the target *and stops on it*: a close look
-  or a return home is the same constant action as the flight there (the scripted searchers fly the same way)."""
+class ActionFrame(StrEnum):
+    """How a policy's two movement components are read (``SarSearchConfig.action_frame``, in the artifact's manifest
+    as its value)."""
+
+    NORTH_EAST = "north_east"
+    """Velocity north and east, each as a share of the top speed (the paper's; SarSearch-v0's only)."""
+    TARGET = "target"
+    """Towards the observation's target point and to the right of that line, as shares of the top speed, so that
+    flying straight at the target is the constant action (1, 0)."""
+    ARRIVE = "arrive"
+    """As TARGET, with the speed also capped by what covers the rest of the way in one step
+    (:func:`arrival_speed_fraction`), so that (1, 0) flies straight at the target *and stops on it*: a close look or
+    a return home is the same constant action as the flight there (the scripted searchers fly the same way)."""
+
+
+ACTION_FRAMES: tuple[str, ...] = tuple(frame.value for frame in ActionFrame)
+"""The action frames' names, as configs and manifests spell them."""
 
 
 def check_action_frame(owner: str, frame: str, task: str) -> None:
     """Raise one ValueError naming ``owner``'s field unless ``frame`` is an action frame the ``task`` supports."""
-    if frame not in ACTION_FRAMES or (frame != "north_east" and task != "SarSearch-v1"):
+    if frame not in ACTION_FRAMES or (frame != ActionFrame.NORTH_EAST and task != "SarSearch-v1"):
         raise ValueError(f"{owner}.action_frame must be 'north_east', or on SarSearch-v1 'target' or 'arrive', got "
                          f"{frame!r} on {task}")
 
@@ -41,14 +52,14 @@ def arrival_speed_fraction(distance_m: np.ndarray, max_speed_mps: float, step_pe
     return np.minimum(1.0, distance_m / (steps * max_speed_mps * step_period_s))
 
 
-def movement_velocity(movement: np.ndarray, position: np.ndarray, target: np.ndarray, frame: str,
+def movement_velocity(movement: np.ndarray, position: np.ndarray, target: np.ndarray, frame: ActionFrame | str,
                       max_speed_mps: float, step_period_s: float) -> np.ndarray:
     """(N, 2) velocity north / east (m/s) commanded by the policy's movement components (N, 2), read in ``frame``
-    (:data:`ACTION_FRAMES`) relative to the drone's ``position`` and the observation's ``target`` (both (N, 2))."""
-    if frame == "north_east":
+    (:class:`ActionFrame`) relative to the drone's ``position`` and the observation's ``target`` (both (N, 2))."""
+    if frame == ActionFrame.NORTH_EAST:
         return movement * max_speed_mps
     velocity = target_frame_to_north_east(movement, position, target) * max_speed_mps
-    if frame == "arrive":
+    if frame == ActionFrame.ARRIVE:
         distance = np.hypot(*(target - position).T)
         velocity *= arrival_speed_fraction(distance, max_speed_mps, step_period_s)[:, None]
     return velocity
@@ -56,7 +67,7 @@ def movement_velocity(movement: np.ndarray, position: np.ndarray, target: np.nda
 
 def target_frame_to_north_east(movement: np.ndarray, position: np.ndarray, target: np.ndarray) -> np.ndarray:
     """(N, 2) movement commands given towards the target point and to the right of the line to it (SarSearch-v1's
-    ``action_frame`` "target"), as north and east components. At the target itself (closer than 1 cm) towards is
+    ``ActionFrame.TARGET``), as north and east components. At the target itself (closer than 1 cm) towards is
     north."""
     offset = target - position
     distance = np.hypot(*offset.T)

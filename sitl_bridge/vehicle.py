@@ -308,7 +308,8 @@ class SimulatedVehicle(MessageHandlers):
         self._down_until_tick = None
         state = self.state
         here = (state.north_m, state.east_m, state.down_m)
-        current = getattr(self.autopilot, "mission_current", 0)
+        # PX4 (the one with ``missions``) resumes its stored mission at the item it was flying
+        current = self.autopilot.mission_current if self.missions is not None else 0
         self.autopilot = make_autopilot(self.config, self.params, self.frame)
         self.autopilot.gps_ok = self.sensors.gps is not None
         self.mission_reports = telemetry.MissionReports()
