@@ -240,8 +240,7 @@ class BeliefSearchState:
         self.goal_steps += 1
         self.altitude += np.clip(self.altitude_target - self.altitude, -DESCENT_MPS * dt_s, CLIMB_MPS * dt_s)
         search.drift_targets(self.targets, scen.drift_velocity, dt_s)
-        belief_logic.drift((self.belief, self.coverage), self.belief_offset, scen.area, scen.forecast_drift, dt_s)
-        self._blur_for_forecast_error()
+        self.drift_map(dt_s)
 
         reported = scen.target_category[rows, scen.primary_index]
         probability = scen.detection_probability(position, self.targets, self.altitude, zoom, intensity)
@@ -328,6 +327,13 @@ class BeliefSearchState:
         looking = (self.status == UNRESOLVED) & ~sighted & slow & (near <= self.flight.reach_radius_m)
         self.unseen_look_s[looking] += dt_s
         self.status[looking & (self.unseen_look_s >= LOST_AFTER_S)] = LOST
+
+    def drift_map(self, dt_s: float) -> None:
+        """Move the map ``dt_s`` seconds on with the forecast drift, and blur it for the forecast's error when a blur
+        is due at ``time_s`` (the clock already moved on)."""
+        belief_logic.drift((self.belief, self.coverage), self.belief_offset, self.scen.area, self.scen.forecast_drift,
+                           dt_s)
+        self._blur_for_forecast_error()
 
     def _blur_for_forecast_error(self) -> None:
         due = self.time_s - self.blurred_s >= belief_logic.BLUR_EVERY_S
