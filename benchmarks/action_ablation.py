@@ -40,9 +40,10 @@ from common import results_file, write_report
 
 from autonomy.observation import LAYOUT_V3
 from missions.coverage import SENSOR_ON_INTENSITY
+from missions.generator import SPLITS
 from missions.goals import GOAL_NAMES, TRACK_OBJECT
-from policies.checkpoint import CheckpointPolicy
 from missions.searchers import fly_straight
+from policies.checkpoint import CheckpointPolicy
 from policies.env.baselines_v0 import ZOOM as SCRIPTED_ZOOM
 from policies.env.core import CAMERA_ZOOM, SEARCH_INTENSITY
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
@@ -56,7 +57,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", help="run folder written by hrlsac train")
     parser.add_argument("--episodes", type=int, default=300)
-    parser.add_argument("--split", default="test", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="test", choices=SPLITS)
     parser.add_argument("--out", default=results_file("action_ablation.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)

@@ -22,8 +22,9 @@ import time
 
 from common import results_file, write_report
 
-from policies.cli.evaluate import read_generator_config
+from missions.generator import SPLITS
 from missions.searchers import SEARCHERS
+from policies.cli.evaluate import read_generator_config
 from policies.env.baselines_v0 import BASELINES_V0
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.baselines import run_baseline
@@ -33,7 +34,7 @@ from policies.evaluation.stats import t_interval
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--split", default="test", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="test", choices=SPLITS)
     parser.add_argument("--task", default="SarSearch-v1", choices=["SarSearch-v0", "SarSearch-v1"])
     parser.add_argument("--only", default=None, help="fly only these searchers (comma-separated names)")
     parser.add_argument("--streams", type=int, default=1, help="detection streams per searcher (default 1)")

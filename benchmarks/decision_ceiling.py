@@ -55,14 +55,14 @@ import numpy as np
 from common import results_file, write_report
 
 import missions.search_state_v1
-from missions.search_state_v1 import TARGET_SLOTS
-from missions.generator import TASK_V1
+from missions.generator import SPLITS, TASK_V1
 from missions.mission import FlightSettings
 from missions.scenario import CATEGORIES
 from missions.search import OBJECT_SIZE_M
+from missions.search_state_v1 import TARGET_SLOTS
+from missions.searchers import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
 from missions.sweep_width import sweep_width_m
 from policies.cli.evaluate import read_generator_config
-from missions.searchers import TUNED, ExpandingSquare, GreedyBayes, LookaheadBayes, ParallelTrack, box_sum
 from policies.evaluation.aggregate import paired_scenario_bootstrap
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
 
@@ -172,7 +172,7 @@ def sweep_rates(flight: FlightSettings) -> dict[str, float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--generator", default=None, help="generator config file (YAML) instead of the task's")
     parser.add_argument("--decoys", type=decoy_range, default=None,
                         help="MIN,MAX decoys per scenario (default: the task's, 1,4)")

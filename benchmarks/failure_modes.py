@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from common import results_file, write_report
 
+from missions.generator import SPLITS
 from missions.mission import FlightSettings
 from policies.evaluation.baselines import run_baseline
 
@@ -42,7 +43,7 @@ def main() -> int:
     parser.add_argument("--eval", nargs="*", default=[], help="evaluation files of hrlsac evaluate (eval_*.json)")
     parser.add_argument("--scripted", nargs="*", default=[],
                         help="scripted searchers to fly (missions.searchers)")
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--generator", default=None, help="generator config file (as hrlsac evaluate --generator)")
     parser.add_argument("--out", default=results_file("failure_modes.json"))

@@ -31,6 +31,7 @@ from autonomy.policy import load_policy
 from autonomy.search_pilot import SearchPilot
 from missions.fleet import Fleet, FleetVehicle
 from missions.fleet_search import FleetSearchState
+from missions.generator import SPLITS
 from missions.mission import FlightSettings, Mission
 from policies.cli.evaluate import read_generator_config
 from policies.evaluation.episodes import episode_batch
@@ -98,7 +99,7 @@ def main() -> int:
     parser.add_argument("--sizes", default="1,2,4")
     parser.add_argument("--areas", default="1km,2km")
     parser.add_argument("--pilots", default="greedy_bayes,policy")
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     add_pool_arguments(parser)
     parser.add_argument("--out", default=results_file("fleet_eval.json"))
     args = parser.parse_args()

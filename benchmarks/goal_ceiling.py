@@ -23,6 +23,7 @@ from common import results_file, write_report
 from decision_ceiling import fly_scripted
 
 from missions import goals as goal_logic
+from missions.generator import SPLITS
 from missions.searchers import TUNED, GreedyBayes, ScriptedSearch
 
 
@@ -60,7 +61,7 @@ def fly(make, split: str, episodes: int) -> dict:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--every", type=int, default=30, help="also ground again every this many steps")
     parser.add_argument("--out", default=results_file("goal_ceiling.json"))
     args = parser.parse_args()

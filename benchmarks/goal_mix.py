@@ -16,6 +16,7 @@ import sys
 import torch
 from common import results_file, write_report
 
+from missions.generator import SPLITS
 from missions.goals import GOAL_NAMES
 from policies.checkpoint import CheckpointPolicy
 from policies.evaluation.episodes import episode_batch, run_episodes, summarise
@@ -46,7 +47,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", help="run folders (or checkpoint files) of hrlsac train --algo hrl-sac")
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--out", default=results_file("goal_mix.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)

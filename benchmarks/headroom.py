@@ -42,7 +42,7 @@ from map_calibration import LookRecorder, calibration
 from autonomy.policy import load_policy
 from missions import belief as belief_logic
 from missions import search
-from missions.generator import TASK_V1
+from missions.generator import SPLITS, TASK_V1
 from missions.mission import FlightSettings
 from missions.search_state_v1 import TARGET_SLOTS
 from missions.searchers import SEARCHERS, TUNED, make_searcher
@@ -226,7 +226,7 @@ def policy_argument(text: str) -> tuple[str, str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--areas", default=",".join(AREAS), help="comma-separated: 1km, 2km")
     parser.add_argument("--large-area", default=f"{ROOT}/docs/results/large-area.yaml",
                         help="generator config file of the 2 km square")

@@ -18,6 +18,7 @@ import torch
 from common import results_file, write_report
 
 from missions.action_frames import movement_velocity
+from missions.generator import SPLITS
 from missions.goals import GOAL_NAMES
 from policies.checkpoint import CheckpointPolicy
 from policies.evaluation.episodes import END_KEYS, episode_batch
@@ -64,7 +65,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", help="run folder written by hrlsac train (HRL-SAC, SarSearch-v1)")
     parser.add_argument("--episodes", type=int, default=60)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--goals", default=",".join(str(i) for i in range(len(GOAL_NAMES))))
     parser.add_argument("--out", default=results_file("low_level_check.json"))
     args = parser.parse_args()

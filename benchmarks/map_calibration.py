@@ -42,12 +42,12 @@ import numpy as np
 import torch
 from common import ROOT, results_file, write_report
 
-from missions.generator import TASK_V1
+from missions.generator import SPLITS, TASK_V1
 from missions.mission import FlightSettings
 from missions.search import OBJECT_SIZE_M, detection_probability_from_factors
 from missions.search_state_v1 import TARGET_SLOTS
-from policies.cli.evaluate import read_generator_config
 from missions.searchers import TUNED, GreedyBayes
+from policies.cli.evaluate import read_generator_config
 from policies.evaluation.episodes import episode_batch, run_episodes
 
 SEARCHERS = ("greedy_bayes", "policy")
@@ -180,7 +180,7 @@ def fly(searcher: str, generator, split: str, episodes: int, policy, particles: 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=2000)
-    parser.add_argument("--split", default="val", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="val", choices=SPLITS)
     parser.add_argument("--only", default=",".join(SEARCHERS), help="searchers (comma-separated: greedy_bayes, policy)")
     parser.add_argument("--areas", default=",".join(AREAS), help="areas (comma-separated: 1km, 2km)")
     parser.add_argument("--large-area", default=f"{ROOT}/docs/results/large-area.yaml",

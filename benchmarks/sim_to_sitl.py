@@ -31,6 +31,7 @@ from common import results_file, write_report
 
 from autonomy.pilots import PilotChoice
 from autonomy.policy import load_policy
+from missions.generator import SPLITS
 from missions.mission import FlightSettings, Mission
 from missions.searchers import SEARCHERS, make_searcher
 from policies.evaluation.episodes import episode_batch, run_episodes
@@ -45,7 +46,7 @@ def main() -> int:
     flown.add_argument("--policy", default="policies/pretrained/hrl-sac.pt")
     flown.add_argument("--pilot", choices=list(SEARCHERS), help="a scripted searcher instead of --policy")
     parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--split", default="test", choices=["train", "val", "test"])
+    parser.add_argument("--split", default="test", choices=SPLITS)
     parser.add_argument("--workers", type=int, default=1, help="local processes flying the replays")
     parser.add_argument("--out", default=results_file("sim_to_sitl.json"))
     args = parser.parse_args()

@@ -43,9 +43,11 @@ from missions.scenario import (CATEGORIES, Conditions, Obstacle, Scenario, Searc
                                Weather)
 from missions.validation import Interval, check_fields
 
-SPLITS: tuple[str, ...] = ("train", "val", "test")
+SPLITS: tuple[str, ...] = ("train", "val", "test", "test2")
+"""train to learn on, val to choose settings, runs and policies on, test for the headlines; test2 a second test split
+of scenarios no one has evaluated, kept to be opened once for one round's headline (docs/results.md)."""
 SPLIT_SEED_STRIDE = 1_000_000_000
-"""Seeds of split i are SPLIT_SEED_STRIDE * i + 0, 1, 2, ... (train 0, val 1, test 2)."""
+"""Seeds of split i are SPLIT_SEED_STRIDE * i + 0, 1, 2, ... (train 0, val 1, test 2, test2 3)."""
 GENERATOR_STREAM_TAG = 0x5A12  # mixed into the generator's seed sequence: a stream of its own
 _MAX_DRAWS = 10_000  # rejection-sampling cap for the datum (the config check makes success possible)
 _OBSTACLE_DRAWS = 100  # attempts per obstacle before it is dropped
@@ -154,7 +156,7 @@ endurance of 600-900 s and a current forecast off by 0.05 m/s per axis (1 sigma)
 
 
 def scenario_seeds(split: str, count: int) -> list[int]:
-    """The first ``count`` generator seeds of ``split`` ("train", "val" or "test"); splits never overlap."""
+    """The first ``count`` generator seeds of ``split`` (one of ``SPLITS``); splits never overlap."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
     if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= SPLIT_SEED_STRIDE:

@@ -16,7 +16,7 @@ from missions.mission_fields import (InvalidField, area_span, construct, field_p
                                      read_integer, read_list, read_mapping, read_number, read_numbers, read_string)
 from missions.scenario import Conditions, Obstacle, Scenario, SearchArea, SeaState, Target, TimeOfDay, Weather
 
-GENERATOR_SPLITS: tuple[str, ...] = ("train", "val", "test")
+GENERATOR_SPLITS: tuple[str, ...] = ("train", "val", "test", "test2")
 """Splits a ``generator`` reference may name (those of missions.generator.scenario_seeds)."""
 
 _TOP_KEYS = ("name", "flight", "geofence", "scenario", "fleet")

@@ -29,13 +29,14 @@ def test_same_seed_same_scenario_and_different_seeds_differ():
 
 
 def test_splits_are_disjoint_and_stable():
-    seeds = {split: set(scenario_seeds(split, 5000)) for split in ("train", "val", "test")}
-    assert not seeds["train"] & seeds["val"] and not seeds["train"] & seeds["test"] and not seeds["val"] & seeds["test"]
+    seeds = {split: set(scenario_seeds(split, 5000)) for split in SPLITS}
+    assert sum(len(s) for s in seeds.values()) == len(set().union(*seeds.values())) == 5000 * len(SPLITS)
     assert scenario_seeds("test", 10) == scenario_seeds("test", 20)[:10]  # growing a split keeps its prefix
     assert scenario_seeds("test", 18)[17] == 2 * SPLIT_SEED_STRIDE + 17
     scenario = [generate_scenario(seed) for seed in scenario_seeds("test", 18)][17]
     assert scenario.name == "gen-test-000017" and scenario.seed == 2 * SPLIT_SEED_STRIDE + 17
-    assert scenario_name(5) == "gen-train-000005" and scenario_name(3 * SPLIT_SEED_STRIDE) == "gen-seed-3000000000"
+    assert scenario_name(5) == "gen-train-000005" and scenario_name(3 * SPLIT_SEED_STRIDE + 4) == "gen-test2-000004"
+    assert scenario_name(4 * SPLIT_SEED_STRIDE) == "gen-seed-4000000000"
     assert [split_seed("val", i) for i in range(30)] == scenario_seeds("val", 30)
     for episode_seed in (0, 17, SPLIT_SEED_STRIDE + 5, 2**63 - 1, np.uint64(2**64 - 1)):
         seeds = {split: split_seed(split, episode_seed) for split in SPLITS}

@@ -5,6 +5,8 @@ import argparse
 import shlex
 import sys
 
+from missions.generator import SPLITS
+
 
 def build_parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -13,7 +15,7 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
                "Writes DIR/report.md, DIR/summary.json, DIR/training_curves.png and DIR/boxplots.png.")
     parser.add_argument("runs", nargs="*", metavar="RUN", help="run folders written by hrlsac train")
     parser.add_argument("--out", metavar="DIR", help="folder for the report and the figures (required)")
-    parser.add_argument("--split", choices=["train", "val", "test"], default="test",
+    parser.add_argument("--split", choices=SPLITS, default="test",
                         help="scenario split (default: test)")
     parser.add_argument("--episodes", type=int, default=None,
                         help="episodes per run and baseline (default: the runs' eval files' count, else 100)")

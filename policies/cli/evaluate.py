@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from hrlsac_cli.help_format import HelpFormatter
+from missions.generator import SPLITS
 from simulation.worker_pool import WorkerPoolError, add_pool_arguments, pool_from_arguments
 
 
@@ -23,7 +24,7 @@ def main(argv: list[str], prog: str = "hrlsac evaluate") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split(":", 1)[1].strip(),
                                      formatter_class=HelpFormatter)
     parser.add_argument("run", help="run folder (or checkpoint file) written by hrlsac train")
-    parser.add_argument("--split", choices=["train", "val", "test"], default="test")
+    parser.add_argument("--split", choices=SPLITS, default="test")
     parser.add_argument("--episodes", type=int, default=None,
                         help="one episode on each of the first N scenarios (default 100; with --missions, one each)")
     scenarios = parser.add_mutually_exclusive_group()

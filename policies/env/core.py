@@ -17,7 +17,7 @@ import numpy as np
 from autonomy.observation import observe_search
 from missions import search
 from missions.action_frames import check_action_frame, movement_velocity
-from missions.generator import TASK_V1, GeneratorConfig, generate_scenario, split_seed
+from missions.generator import SPLITS, TASK_V1, GeneratorConfig, generate_scenario, split_seed
 from missions.mission import FlightSettings
 from missions.scenario import Scenario
 from missions.search_state_v0 import splitmix64
@@ -90,8 +90,8 @@ class SarSearchConfig:
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ValueError(f"SarSearchConfig.task must be one of {', '.join(TASKS)}, got {self.task!r}")
-        if not self.scenarios and self.split not in ("train", "val", "test"):
-            raise ValueError(f"SarSearchConfig.split must be one of train, val, test, got {self.split!r}")
+        if not self.scenarios and self.split not in SPLITS:
+            raise ValueError(f"SarSearchConfig.split must be one of {', '.join(SPLITS)}, got {self.split!r}")
         check_fields(self, (("pool_size", 1, 100_000), ("max_obstacles", 1, 64)),
                      integers=("pool_size", "max_obstacles"))
         if self.max_targets is not None:
