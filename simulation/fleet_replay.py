@@ -56,13 +56,14 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
                  config: RunnerConfig = RunnerConfig(), say: Callable[[str], None] = lambda text: None,
                  limits: FlyawayLimits = FlyawayLimits(), start_time: datetime = DEFAULT_START_TIME,
                  battery_percent: dict[str, float] | None = None,
-                 link_faults: dict[str, LinkFaults] | None = None) -> dict:
+                 link_faults: dict[str, LinkFaults] | None = None, signing_key: bytes | None = None) -> dict:
     """Fly the fleet ``mission`` once with ``policy`` (a scripted searcher flies the fleet's rows together; an
     artifact flies each drone); ``seed`` drives the vehicles' sensor noise and the cameras' draws. With ``out``,
     writes the report and each drone's tlog there. Returns the fleet's report. ``battery_percent``: drones (by
     name) that take off with a part-charged battery (a drone that has to leave early). ``link_faults``: faults on
     drones' links (by name), timed on the simulated clock, seeded by ``seed`` plus the drone's place unless they
-    carry their own seed."""
+    carry their own seed. ``signing_key``: every vehicle and runner signs its link with this key (MAVLink 2
+    signing, as ``replay_mission``'s); the report counts what each side accepted and refused."""
     if mission.fleet is None:
         raise ValueError(f"{mission.name or 'the mission'} has no fleet section: fly it with replay_mission")
     fleet = mission.fleet
@@ -78,7 +79,8 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
         faults = (link_faults or {}).get(vehicle_spec.name)
         vehicle_links = apply_faults([vehicle_end], faults, lambda: vehicles[0].time_s, seed + i)
         vehicle = SimulatedVehicle(VehicleConfig(home=GeoPoint(lat, lon, alt), seed=seed + i,
-                                                 system_id=vehicle_spec.system_id, airframe=airframe_for(own)),
+                                                 system_id=vehicle_spec.system_id, airframe=airframe_for(own),
+                                                 signing_key=signing_key),
                                    vehicle_links, on_event=lambda event, k=i: watches[k].on_vehicle_event(event))
         if battery_percent and vehicle_spec.name in battery_percent:
             charge = vehicle.config.airframe.battery_capacity_wh * battery_percent[vehicle_spec.name] / 100.0
@@ -94,7 +96,7 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
             tlogs.append(tlog)
         connection = MemoryMavConnection(client_end, source_system=vehicle_spec.system_id,
                                          source_component=COMPANION_COMPONENT)
-        links.append(VehicleLink(connection, lambda: vehicles[0].time_s, tlog, warn=say))
+        links.append(VehicleLink(connection, lambda: vehicles[0].time_s, tlog, signing_key=signing_key, warn=say))
 
     def observe() -> None:
         for watch in watches:
@@ -122,9 +124,12 @@ def replay_fleet(mission: Mission, policy: FlownPolicy, seed: int = 0, out: Path
             tlog.close()
     report.update(policy.describe(), seed=seed, clock="lockstep",
                   link_faults={name: faults.describe() for name, faults in (link_faults or {}).items()})
-    for drone, watch in zip(report["vehicles"], watches):
+    for drone, watch, vehicle, link in zip(report["vehicles"], watches, vehicles, links):
         watch.settle()
         drone["outcome"] = watch.outcome(drone)
+        if signing_key is not None:
+            drone["signing"] = {"vehicle": vehicle.signing.summary() if vehicle.signing else None,
+                                "runner": link.signing.summary()}
     report["all_completed"] = all(d["outcome"]["outcome"] == "completed" for d in report["vehicles"])
     partial.finish(report)
     return report
@@ -143,6 +148,8 @@ class FleetEpisode:
     """As :func:`replay_fleet`'s."""
     out: Path | None = None
     """Where the worker writes the report and the tlogs (None: nothing written)."""
+    signing_key: bytes | None = None
+    """As :func:`replay_fleet`'s."""
     start_time: datetime = DEFAULT_START_TIME
     """As :func:`replay_fleet`'s."""
 
@@ -154,7 +161,7 @@ def fly_fleet_episode(episode: FleetEpisode) -> dict:
     speak_mavlink2()
     report = replay_fleet(episode.mission, episode.pilot.load(), seed=episode.seed, out=episode.out,
                           start_time=episode.start_time, battery_percent=episode.battery_percent,
-                          link_faults=episode.link_faults)
+                          link_faults=episode.link_faults, signing_key=episode.signing_key)
     report["vehicles"] = [{"name": d["name"], "search_end": d["search_end"], "outcome": d["outcome"]["outcome"],
                            "landed": d["transitions"][-1]["reason"] == "landed and disarmed",
                            "flight_time_s": d["flight_time_s"], "energy_left": d["energy_left"]}

@@ -51,9 +51,6 @@ def _check_replay_arguments(args: argparse.Namespace, mission) -> None:
     if not 1 <= args.episodes <= 100_000:
         raise ValueError(f"--episodes must be in [1, 100000], got {args.episodes}")
     args.start = mission_replay.DEFAULT_START_TIME if args.start_time is None else parse_start_time(args.start_time)
-    if mission.fleet is not None and args.signing_key:
-        raise ValueError(f"--signing-key: not available for a fleet replay yet; fly {args.mission} without it, or "
-                         "one drone's mission (without the fleet section) with it")
     args.faults = None
     if args.link_faults:
         from sitl_bridge.faults import parse_link_faults  # a real flight has the real link's faults
@@ -75,7 +72,8 @@ def _replay_fleet(mission, policy, args, out: Path, prog: str) -> int:
     started = time.perf_counter()
     if args.episodes == 1:
         say = (lambda text: None) if args.quiet else print
-        report = replay_fleet(mission, policy, args.seed, out, say=say, start_time=args.start, link_faults=faults)
+        report = replay_fleet(mission, policy, args.seed, out, say=say, start_time=args.start, link_faults=faults,
+                              signing_key=args.key)
         wall = time.perf_counter() - started
         simulated = max(d["flight_time_s"] for d in report["vehicles"])
         print(fleet_summary(report))
@@ -83,7 +81,7 @@ def _replay_fleet(mission, policy, args, out: Path, prog: str) -> int:
               f"{out / 'report.json'}")
         return 0
     episodes = [FleetEpisode(mission, args.choice, args.seed + k, link_faults=faults,
-                             out=out / f"seed-{args.seed + k:05d}", start_time=args.start)
+                             out=out / f"seed-{args.seed + k:05d}", start_time=args.start, signing_key=args.key)
                 for k in range(args.episodes)]
     progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet)
     try:

@@ -16,7 +16,10 @@ from missions.fleet import Fleet
 from missions.mission_file import load_mission
 from simulation.fleet_replay import replay_fleet
 from autonomy.pilots import ScriptedPilot
+from mavlink_signing import SIGNED_FLAG
 from sitl_bridge.faults import parse_link_faults
+
+KEY = bytes(range(32))
 
 SMALL_FLEET = """\
 name: small-fleet
@@ -95,14 +98,15 @@ def test_each_drone_has_its_own_tlog_of_its_own_system(demo_replay):
         assert sources == {system_id}  # the vehicle, and its companion sharing its system id
 
 
-def test_a_drone_that_loses_its_link_holds_and_two_replays_write_identical_tlogs(small_fleet, tmp_path):
+def test_a_drone_that_loses_its_link_holds_and_two_signed_replays_write_identical_tlogs(small_fleet, tmp_path):
     """A 12 s two-way outage of drone 2's link in the search: its runner holds (blind) and the fleet's rounds go on
     without it; once the link is back it searches on, and both drones land at home, never breaching separation.
-    The same seed and faults replayed again write the same bytes."""
+    Every link is signed, and nothing unsigned or forged was accepted. The same seed and faults replayed again
+    write the same bytes."""
     mission = load_mission(small_fleet)
     faults = {"drone2": parse_link_faults("outage=45:12")}
-    reports = [replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3, out=tmp_path / run, link_faults=faults)
-               for run in "ab"]
+    reports = [replay_fleet(mission, ScriptedPilot("greedy_bayes"), seed=3, out=tmp_path / run, link_faults=faults,
+                            signing_key=KEY) for run in "ab"]
     report = reports[0]
     first, second = report["vehicles"]
     assert any(e["event"] == "link" and "holding position" in e["reason"] for e in second["events"])
@@ -110,9 +114,15 @@ def test_a_drone_that_loses_its_link_holds_and_two_replays_write_identical_tlogs
     assert report["success"] and report["all_completed"] and not report["separation"]["breached"]
     assert report["link_faults"] == {"drone2": "both ways outage=45:12"}
     assert reports[0] == reports[1]
+    for drone in report["vehicles"]:
+        vehicle, runner = drone["signing"]["vehicle"], drone["signing"]["runner"]
+        assert vehicle["rejected_total"] == runner["rejected_total"] == 0
+        assert vehicle["accepted_unsigned"] == runner["accepted_unsigned"] == {}
+        assert vehicle["accepted_signed"] > 500 and runner["accepted_signed"] > 1000
     for name in ("drone1", "drone2"):
         tlogs = [(tmp_path / run / name / "flight.tlog").read_bytes() for run in "ab"]
         assert tlogs[0] == tlogs[1] and len(tlogs[0]) > 100_000
+        assert tlogs[0][8] == 0xFD and tlogs[0][10] & SIGNED_FLAG  # the first frame: MAVLink 2, signed
 
 
 def test_the_shield_keeps_two_drones_flying_the_same_pattern_on_one_layer_apart(small_fleet):
@@ -160,13 +170,11 @@ def test_a_drone_that_goes_home_early_leaves_its_water_to_the_other(small_fleet)
     assert left < report["found_at_s"]  # it went home first, and drone 1 searched on alone
 
 
-@pytest.mark.parametrize("flags, mentions", [
-    (["--signing-key", "link.key"], ("--signing-key", "fleet")),
-])
-def test_fleet_replay_options_it_cannot_take_are_one_line_errors(small_fleet, tmp_path, flags, mentions):
+def test_a_fleet_replay_refuses_a_bad_key_file_in_one_line(small_fleet, tmp_path):
     out = tmp_path / "never"
+    missing = tmp_path / "link.key"
     assert_clean_error(run_cli("mission", "replay", str(small_fleet), "--pilot", "greedy_bayes", "--out", str(out),
-                               *flags), *mentions)
+                               "--signing-key", str(missing)), f"key file {missing} does not exist", "hrlsac keygen")
     assert not out.exists()
 
 
