@@ -97,7 +97,7 @@ ERRORS = {
     "generator index < 0": (changed(scenario={"generator": {"split": "test", "index": -1}}),
                             "scenario.generator.index: must be an integer >= 0, got -1"),
     "generator split": (changed(scenario={"generator": {"split": "tset", "index": 1}}),
-                        "scenario.generator.split: 'tset' is not one of train, val, test; did you mean 'test'?"),
+                        "scenario.generator.split: 'tset' is not one of train, val, test, test2; did you mean 'test'?"),
     "generator seed and index": (changed(scenario={"generator": {"seed": 4, "index": 1}}),
                                  "scenario.generator: give either seed, or split and index, not both"),
     "generator without index": (changed(scenario={"generator": {"split": "test"}}),

@@ -59,7 +59,7 @@ class SarSearchConfig:
     task: str = "SarSearch-v1"
     """Environment version, one of TASKS."""
     split: str = "train"
-    """Generator split the scenarios come from ("train", "val" or "test") when ``scenarios`` is empty."""
+    """Generator split the scenarios come from (one of ``missions.generator.SPLITS``) when ``scenarios`` is empty."""
     scenarios: tuple[Scenario, ...] = ()
     """A fixed list of scenarios (a dataset split, mission files); episode seeds index into it."""
     pool_size: int = 10_000
