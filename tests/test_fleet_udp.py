@@ -5,6 +5,7 @@ carries both (``autonomy.shared_port``). Both drones search on their layers, ret
 tlog holds its own system's traffic only."""
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import signal
 import subprocess
@@ -50,14 +51,24 @@ def fly_fleet(folder: Path, ground_station_port: bool) -> tuple[subprocess.Compl
     return result, vehicle_log
 
 
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory) -> dict[bool, tuple[Path, subprocess.CompletedProcess, str]]:
+    """Both fleets flown at once (each flight waits on real time, not on the CPU): by ``ground_station_port``, the
+    folder, the run and the vehicles' log."""
+    folders = {port: tmp_path_factory.mktemp("fleet-udp") / "fleet" for port in (False, True)}
+    with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+        runs = {port: pool.submit(fly_fleet, folder, port) for port, folder in folders.items()}
+        return {port: (folders[port], *run.result()) for port, run in runs.items()}
+
+
 @pytest.mark.parametrize("ground_station_port", [False, True], ids=["a port per drone", "one ground-station port"])
-def test_a_fleet_flies_over_real_udp_against_hrlsac_sitl_count_2(tmp_path, ground_station_port):
-    result, vehicle_log = fly_fleet(tmp_path / "fleet", ground_station_port)
+def test_a_fleet_flies_over_real_udp_against_hrlsac_sitl_count_2(flights, ground_station_port):
+    folder, result, vehicle_log = flights[ground_station_port]
     assert result.returncode == 0, result.stdout + result.stderr
     assert "udp-fleet (greedy_bayes, 2 drones): victim not found; 2 of 2 landed and disarmed; separation kept" \
         in result.stdout
     assert "vehicle 2 of 2: Simulated PX4 multirotor (sysid 2)" in vehicle_log
-    report = json.loads((tmp_path / "fleet" / "out" / "report.json").read_text())
+    report = json.loads((folder / "out" / "report.json").read_text())
     assert report["complete"] and report["clock"] == "wall" and report["all_landed"]
     assert not report["separation"]["breached"]
     for system_id, drone in enumerate(report["vehicles"], start=1):
@@ -65,8 +76,7 @@ def test_a_fleet_flies_over_real_udp_against_hrlsac_sitl_count_2(tmp_path, groun
         assert drone["search_end"] == "step limit"
         to_search = next(t for t in drone["transitions"] if t["to"] == "OFFBOARD")
         assert float(to_search["reason"].split()[1]) >= [9.0, 14.0][system_id - 1]  # its own layer: 10 or 15 m
-        log = mavutil.mavlink_connection(str(tmp_path / "fleet" / "out" / drone["name"] / "flight.tlog"),
-                                         dialect="common")
+        log = mavutil.mavlink_connection(str(folder / "out" / drone["name"] / "flight.tlog"), dialect="common")
         targets, sources = set(), set()
         while (msg := log.recv_match()) is not None:
             sources.add(msg.get_srcSystem())
