@@ -110,6 +110,12 @@ class SharedUdpPort:
             except OSError:  # the vehicle's port is gone for now: UDP loses it, as it would on the way
                 pass
 
+    def release(self, system_id: int) -> None:
+        """Forget ``system_id``'s channel; the port closes with its last channel."""
+        self._inboxes.pop(system_id, None)
+        if not self._inboxes:
+            self.sock.close()
+
     def close(self) -> None:
         self.sock.close()
 
@@ -136,6 +142,4 @@ class SystemChannel(mavutil.mavfile):
         self.port.send(self.system_id, buf)
 
     def close(self) -> None:
-        self.port._inboxes.pop(self.system_id, None)
-        if not self.port._inboxes:
-            self.port.close()
+        self.port.release(self.system_id)

@@ -10,6 +10,7 @@ import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Callable
 
 from autonomy.mission_cli import mission_parser, prepare_mission
 from hrlsac_cli import GROUPS
@@ -83,14 +84,10 @@ def _replay_fleet(mission, policy, args, out: Path, prog: str) -> int:
     episodes = [FleetEpisode(mission, args.choice, args.seed + k, link_faults=faults,
                              out=out / f"seed-{args.seed + k:05d}", start_time=args.start, signing_key=args.key)
                 for k in range(args.episodes)]
-    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet)
-    try:
-        reports = run_tasks(fly_fleet_episode, episodes, args.pool, lambda index, report: progress.update(1))
-    except WorkerPoolError as exc:
-        progress.close()
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+    reports = _fly_with_progress(lambda on_done: run_tasks(fly_fleet_episode, episodes, args.pool, on_done),
+                                 args.episodes, not args.quiet, prog)
+    if reports is None:
         return 2
-    progress.close()
     wall = time.perf_counter() - started
     simulated = sum(max(d["flight_time_s"] for d in report["vehicles"]) for report in reports)
     found = sum(report["success"] for report in reports)
@@ -98,6 +95,29 @@ def _replay_fleet(mission, policy, args, out: Path, prog: str) -> int:
           "found the victim")
     print(f"  {simulated:.0f} s simulated in {wall:.1f} s, {simulated / wall:.0f}x real time; report: {out}")
     return 0
+
+
+def _fly_with_progress(fly: Callable[[Callable[[int, dict], None]], list[dict]], episodes: int, show: bool,
+                       prog: str) -> list[dict] | None:
+    """``fly(on_done)``'s reports, with a progress bar of the episodes and their success so far (``show``); None
+    after a one-line error when the worker pool cannot be used."""
+    progress = progress_bar(episodes, "episode", "episodes", enabled=show)
+    successes = 0
+
+    def on_done(index: int, report: dict) -> None:
+        nonlocal successes
+        successes += bool(report["success"])
+        progress.set_postfix_str(f"success {successes / (progress.n + 1):.0%}", refresh=False)
+        progress.update(1)
+
+    try:
+        reports = fly(on_done)
+    except WorkerPoolError as exc:
+        progress.close()  # before the error line, which must stand on its own
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return None
+    progress.close()
+    return reports
 
 
 def parse_start_time(text: str) -> datetime:
@@ -121,24 +141,12 @@ def _replay(mission, policy, args, out: Path, prog: str) -> int:
                               out if args.episodes == 1 else out / f"seed-{args.seed + episode:05d}",
                               video=not args.no_video, narrate=args.episodes == 1 and not args.quiet, options=options)
                 for episode in range(args.episodes)]
-    successes = 0
     started = time.perf_counter()
     # a single episode narrates its flight instead
-    progress = progress_bar(args.episodes, "episode", "episodes", enabled=not args.quiet and args.episodes > 1)
-
-    def show_progress(index: int, report: dict) -> None:
-        nonlocal successes
-        successes += bool(report["success"])
-        progress.set_postfix_str(f"success {successes / (progress.n + 1):.0%}", refresh=False)
-        progress.update(1)
-
-    try:
-        reports = replay_episodes(episodes, args.pool, show_progress)
-    except WorkerPoolError as exc:
-        progress.close()
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+    reports = _fly_with_progress(lambda on_done: replay_episodes(episodes, args.pool, on_done), args.episodes,
+                                 not args.quiet and args.episodes > 1, prog)
+    if reports is None:
         return 2
-    progress.close()
     wall = time.perf_counter() - started
     simulated = sum(r["flight_time_s"] for r in reports)
     successes = sum(r["success"] for r in reports)

@@ -36,7 +36,7 @@ class Wind:
     # Per axis (north, east, down): tuple of (amplitude m/s, angular frequency rad/s, phase rad,
     # amplitude / angular frequency m), the last one precomputed for the displacement integral.
     _terms: tuple = field(init=False, repr=False, compare=False)
-    _last_gust: list = field(init=False, repr=False, compare=False)  # [time, gust]: asked twice per physics tick
+    _last_gust: list = field(init=False, repr=False, compare=False)  # [(time, gust)]: asked twice per physics tick
 
     def __post_init__(self) -> None:
         check_fields(self, (("north_mps", FINITE), ("east_mps", FINITE), ("gust_mps", NON_NEGATIVE)))
@@ -53,15 +53,15 @@ class Wind:
             terms.append(tuple((w * norm, _TWO_PI / p, ph, w * norm * p / _TWO_PI)
                                for w, p, ph in zip(weights, periods, phases)))
         object.__setattr__(self, "_terms", tuple(terms))
-        object.__setattr__(self, "_last_gust", [None, (0.0, 0.0, 0.0)])
+        object.__setattr__(self, "_last_gust", [(None, (0.0, 0.0, 0.0))])
 
     def gust_velocity(self, time_s: float) -> tuple[float, float, float]:
         """Gust part of the air velocity (NED, m/s) at absolute simulated time ``time_s``."""
-        last = self._last_gust
-        if last[0] != time_s:
-            last[0] = time_s
-            last[1] = tuple(sum(a * math.sin(w * time_s + ph) for a, w, ph, _ in axis) for axis in self._terms)
-        return last[1]
+        when, gust = self._last_gust[0]
+        if when != time_s:
+            gust = tuple(sum(a * math.sin(w * time_s + ph) for a, w, ph, _ in axis) for axis in self._terms)
+            self._last_gust[0] = (time_s, gust)
+        return gust
 
 
 def axis_displacement(terms: tuple, t0_s, t1_s, xp=ScalarMath):
